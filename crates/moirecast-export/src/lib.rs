@@ -1,0 +1,173 @@
+//! Output files: binary STL and an all-or-nothing output directory.
+//!
+//! Nothing is written until every file of a run has been encoded and every
+//! check has passed; then each file goes to a temporary name in the target
+//! directory and is renamed into place, so a failed run leaves no partial
+//! file behind and readers never see half a file.
+
+use moirecast_kernel::check::solid_checks;
+use moirecast_kernel::Mesh;
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum ExportError {
+    /// A mesh failed a solid check (METHOD §7.1); nothing was written.
+    #[error("refusing to write `{file}`: check `{check}` failed ({detail})")]
+    InvalidMesh {
+        file: String,
+        check: &'static str,
+        detail: String,
+    },
+    /// The operating system refused a write or rename.
+    #[error("cannot write `{path}`: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+/// Encodes `mesh` as binary STL (f32 coordinates, outward facet normals),
+/// after checking it is a valid solid.
+pub fn stl_bytes(file: &str, mesh: &Mesh) -> Result<Vec<u8>, ExportError> {
+    if let Some(c) = solid_checks(mesh).into_iter().find(|c| !c.passed) {
+        return Err(ExportError::InvalidMesh {
+            file: file.to_owned(),
+            check: c.name,
+            detail: format!("{} {} vs limit {}; {}", c.value, c.unit, c.limit, c.detail),
+        });
+    }
+    let triangles = mesh.triangles.iter().map(|t| {
+        let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+        let n = (b - a).cross(c - a).normalize_or_zero();
+        let v = |p: glam::DVec3| stl_io::Vertex::new([p.x as f32, p.y as f32, p.z as f32]);
+        stl_io::Triangle {
+            normal: stl_io::Normal::new([n.x as f32, n.y as f32, n.z as f32]),
+            vertices: [v(a), v(b), v(c)],
+        }
+    });
+    let mut out = Vec::with_capacity(84 + 50 * mesh.triangles.len());
+    stl_io::write_stl(&mut out, triangles).map_err(|source| ExportError::Io {
+        path: file.into(),
+        source,
+    })?;
+    Ok(out)
+}
+
+/// Files staged for one output directory, written together by [`commit`](Self::commit).
+#[derive(Default)]
+pub struct OutputSet {
+    files: Vec<(String, Vec<u8>)>,
+}
+
+impl OutputSet {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Stages `bytes` as `name` (a file name inside the directory).
+    pub fn add(&mut self, name: &str, bytes: Vec<u8>) {
+        self.files.push((name.to_owned(), bytes));
+    }
+
+    /// Names and sizes of the staged files.
+    pub fn sizes(&self) -> Vec<(String, usize)> {
+        self.files
+            .iter()
+            .map(|(n, b)| (n.clone(), b.len()))
+            .collect()
+    }
+
+    /// Writes every staged file into `dir` (created if missing): all to
+    /// temporary names first, then all renamed. On error, temporaries are removed.
+    pub fn commit(self, dir: &Path) -> Result<Vec<PathBuf>, ExportError> {
+        std::fs::create_dir_all(dir).map_err(|source| ExportError::Io {
+            path: dir.to_owned(),
+            source,
+        })?;
+        let mut temps = Vec::new();
+        let cleanup = |temps: &[(PathBuf, PathBuf)]| {
+            for (t, _) in temps {
+                let _ = std::fs::remove_file(t);
+            }
+        };
+        for (name, bytes) in &self.files {
+            let target = dir.join(name);
+            let temp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+            if let Err(source) = std::fs::write(&temp, bytes) {
+                cleanup(&temps);
+                let _ = std::fs::remove_file(&temp);
+                return Err(ExportError::Io { path: temp, source });
+            }
+            temps.push((temp, target));
+        }
+        for (temp, target) in &temps {
+            if let Err(source) = std::fs::rename(temp, target) {
+                cleanup(&temps);
+                return Err(ExportError::Io {
+                    path: target.clone(),
+                    source,
+                });
+            }
+        }
+        Ok(temps.into_iter().map(|(_, t)| t).collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    #[test]
+    fn stl_round_trips_through_stl_io() {
+        let m = Mesh {
+            positions: vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z],
+            triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        };
+        let bytes = stl_bytes("t.stl", &m).unwrap();
+        assert_eq!(bytes.len(), 84 + 4 * 50);
+        let back = stl_io::read_stl(&mut std::io::Cursor::new(bytes)).unwrap();
+        assert_eq!(back.faces.len(), 4);
+        assert_eq!(back.vertices.len(), 4);
+    }
+
+    #[test]
+    fn an_open_mesh_is_refused() {
+        let m = Mesh {
+            positions: vec![DVec3::ZERO, DVec3::X, DVec3::Y],
+            triangles: vec![[0, 1, 2]],
+        };
+        assert!(matches!(
+            stl_bytes("open.stl", &m),
+            Err(ExportError::InvalidMesh {
+                check: "closed-oriented",
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn commit_writes_everything_or_nothing() {
+        let dir =
+            std::env::temp_dir().join(format!("moirecast-export-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut set = OutputSet::new();
+        set.add("a.txt", b"a".to_vec());
+        set.add("b.txt", b"b".to_vec());
+        set.commit(&dir).unwrap();
+        assert_eq!(std::fs::read(dir.join("b.txt")).unwrap(), b"b");
+        let leftovers = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .ends_with(".tmp")
+            })
+            .count();
+        assert_eq!(leftovers, 0);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,238 @@
+//! Named checks of METHOD §7.1, each carrying its evidence: what was
+//! measured, the limit, and where the worst case is.
+
+use crate::mesh::Mesh;
+use rayon::prelude::*;
+
+/// The outcome of one check.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CheckResult {
+    pub name: &'static str,
+    /// The measured value, in `unit`.
+    pub value: f64,
+    /// The limit the value is compared against (see `passed`).
+    pub limit: f64,
+    pub unit: &'static str,
+    pub passed: bool,
+    /// Where the worst case is, or what was counted.
+    pub detail: String,
+}
+
+impl CheckResult {
+    pub fn at_most(
+        name: &'static str,
+        value: f64,
+        limit: f64,
+        unit: &'static str,
+        detail: String,
+    ) -> Self {
+        CheckResult {
+            name,
+            value,
+            limit,
+            unit,
+            passed: value <= limit,
+            detail,
+        }
+    }
+    pub fn at_least(
+        name: &'static str,
+        value: f64,
+        limit: f64,
+        unit: &'static str,
+        detail: String,
+    ) -> Self {
+        CheckResult {
+            name,
+            value,
+            limit,
+            unit,
+            passed: value >= limit,
+            detail,
+        }
+    }
+}
+
+/// Smallest triangle altitude (mm) that is not a degenerate triangle: far
+/// below any tolerance, far above round-off.
+pub const MIN_ALTITUDE_MM: f64 = 1e-7;
+
+/// The solid checks every mesh must pass before it is written
+/// (METHOD §7.1): finite, closed and oriented, one shell of genus 0,
+/// positive volume, no degenerate triangles.
+pub fn solid_checks(mesh: &Mesh) -> Vec<CheckResult> {
+    let mut out = Vec::new();
+    let bad_coords = mesh.positions.iter().filter(|p| !p.is_finite()).count();
+    out.push(CheckResult::at_most(
+        "finite-coordinates",
+        bad_coords as f64,
+        0.0,
+        "vertices",
+        format!("{} vertices", mesh.positions.len()),
+    ));
+
+    // Closed and oriented: every directed edge appears once, and so does its reverse.
+    let mut edges: Vec<u64> = mesh
+        .triangles
+        .par_iter()
+        .flat_map_iter(|t| (0..3).map(move |e| ((t[e] as u64) << 32) | t[(e + 1) % 3] as u64))
+        .collect();
+    edges.par_sort_unstable();
+    let duplicated = edges.windows(2).filter(|w| w[0] == w[1]).count();
+    let unmatched = edges
+        .par_iter()
+        .filter(|&&e| edges.binary_search(&((e << 32) | (e >> 32))).is_err())
+        .count();
+    out.push(CheckResult::at_most(
+        "closed-oriented",
+        (duplicated + unmatched) as f64,
+        0.0,
+        "edges",
+        format!(
+            "{} directed edges; {duplicated} repeated, {unmatched} without an opposite",
+            edges.len()
+        ),
+    ));
+
+    // One shell, genus 0: connected, and V − E + F = 2.
+    let mut parent: Vec<u32> = (0..mesh.positions.len() as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    for t in &mesh.triangles {
+        for e in 1..3 {
+            let (a, b) = (find(&mut parent, t[0]), find(&mut parent, t[e]));
+            if a != b {
+                parent[a as usize] = b;
+            }
+        }
+    }
+    let mut used = vec![false; mesh.positions.len()];
+    for t in &mesh.triangles {
+        for &v in t {
+            used[v as usize] = true;
+        }
+    }
+    let vertices = used.iter().filter(|&&u| u).count();
+    let shells = (0..mesh.positions.len() as u32)
+        .filter(|&v| used[v as usize] && find(&mut parent, v) == v)
+        .count();
+    let euler = vertices as i64 - (edges.len() / 2) as i64 + mesh.triangles.len() as i64;
+    out.push(CheckResult::at_most(
+        "one-shell",
+        shells as f64,
+        1.0,
+        "shells",
+        format!(
+            "{shells} connected shells, {} unused vertices",
+            mesh.positions.len() - vertices
+        ),
+    ));
+    let genus = (2 - euler) as f64 / 2.0;
+    out.push(CheckResult {
+        name: "genus-0",
+        value: genus,
+        limit: 0.0,
+        unit: "",
+        passed: genus == 0.0,
+        detail: format!("Euler characteristic {euler}"),
+    });
+
+    let volume = mesh.volume();
+    out.push(CheckResult {
+        name: "positive-volume",
+        value: volume,
+        limit: 0.0,
+        unit: "mm³",
+        passed: volume > 0.0,
+        detail: String::new(),
+    });
+
+    let (min_alt, worst) = mesh
+        .triangles
+        .par_iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+            let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+            let alt = if longest > 0.0 {
+                (b - a).cross(c - a).length() / longest
+            } else {
+                0.0
+            };
+            (alt, i)
+        })
+        .reduce(
+            || (f64::INFINITY, 0),
+            |x, y| {
+                if y.0 < x.0 || (y.0 == x.0 && y.1 < x.1) {
+                    y
+                } else {
+                    x
+                }
+            },
+        );
+    let at = mesh
+        .triangles
+        .get(worst)
+        .map(|t| mesh.positions[t[0] as usize])
+        .unwrap_or_default();
+    out.push(CheckResult::at_least(
+        "no-degenerate-triangles",
+        min_alt,
+        MIN_ALTITUDE_MM,
+        "mm",
+        format!(
+            "smallest altitude, at triangle {worst} near ({:.3}, {:.3}, {:.3})",
+            at.x, at.y, at.z
+        ),
+    ));
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    fn tetra() -> Mesh {
+        Mesh {
+            positions: vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z],
+            triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        }
+    }
+
+    #[test]
+    fn tetrahedron_passes() {
+        for c in solid_checks(&tetra()) {
+            assert!(c.passed, "{c:?}");
+        }
+        assert!((tetra().volume() - 1.0 / 6.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn flipped_or_open_meshes_fail() {
+        let mut m = tetra();
+        m.triangles[0] = [0, 1, 2];
+        let failed: Vec<_> = solid_checks(&m)
+            .into_iter()
+            .filter(|c| !c.passed)
+            .map(|c| c.name)
+            .collect();
+        assert!(failed.contains(&"closed-oriented"), "{failed:?}");
+        let mut m = tetra();
+        m.triangles.pop();
+        assert!(solid_checks(&m)
+            .iter()
+            .any(|c| c.name == "closed-oriented" && !c.passed));
+        let mut m = tetra();
+        m.positions[3] = DVec3::new(0.5, 0.5, 0.0);
+        assert!(solid_checks(&m)
+            .iter()
+            .any(|c| c.name == "no-degenerate-triangles" && !c.passed));
+    }
+}

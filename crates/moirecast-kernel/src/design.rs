@@ -1,0 +1,531 @@
+//! A validated design: the parameters of METHOD §1–§5 plus everything
+//! derived from them. [`Design::new`] is the only way in, and it enforces
+//! every validity rule of METHOD with a [`DesignError`] naming the parameter,
+//! the value, the allowed range and the fix.
+
+use crate::error::{DesignError, Param};
+use crate::lens::ArcRule;
+use crate::profile::Profile;
+use crate::surface::PitchSurface;
+use crate::tolerance::Tolerance;
+use glam::DVec2;
+
+/// How revealer lens radii are chosen (METHOD §2).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LensRule {
+    /// Constant angular field of view (the paper's choice, the default).
+    ConstantAfov,
+    /// Every lens has the standard radius r_s (Fig. 4b, for comparison).
+    EqualRadius,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct LensParams {
+    /// Angular field of view α (rad).
+    pub afov: f64,
+    /// Refractive index n_l.
+    pub index: f64,
+    pub rule: LensRule,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct BaseParams {
+    /// Weight between the offset (0) and focal (1) surface.
+    pub a: f64,
+    /// Offset distance d (mm); `None` means the standard focal depth D_s.
+    pub d: Option<f64>,
+    /// Elevation amplitude A, in periods.
+    pub levels: f64,
+    /// AFOV of the base lenses (rad); `None` means the revealer's α.
+    pub afov: Option<f64>,
+}
+
+/// The raw inputs of a design, in mm and radians.
+#[derive(Clone, Debug)]
+pub struct DesignParams {
+    pub surface: PitchSurface,
+    pub width: f64,
+    pub height: f64,
+    pub period: f64,
+    pub lens: LensParams,
+    pub base: BaseParams,
+    pub profile: Profile,
+    pub tolerance: f64,
+}
+
+/// The standard lens: the lens of the flat device, w_s = T (METHOD §2).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StandardLens {
+    pub width: f64,
+    pub radius: f64,
+    pub sag: f64,
+    pub focal_length: f64,
+    pub focal_depth: f64,
+}
+
+impl StandardLens {
+    pub fn new(period: f64, afov: f64, index: f64) -> Self {
+        let radius = period / (2.0 * (afov / 2.0).sin());
+        let sag = radius * (1.0 - (afov / 2.0).cos());
+        let focal_length = index * radius / (index - 1.0);
+        StandardLens {
+            width: period,
+            radius,
+            sag,
+            focal_length,
+            focal_depth: focal_length - sag,
+        }
+    }
+}
+
+/// Allowed ranges, written once, used by validation and documentation.
+pub mod limits {
+    /// AFOV (degrees). Below 10° lenses are nearly flat; above 120° their
+    /// flanks are too steep to demould or to stay graphs on curved surfaces.
+    pub const AFOV_DEG: (f64, f64) = (10.0, 120.0);
+    pub const INDEX: (f64, f64) = (1.0, 3.0);
+    pub const PERIOD_MM: (f64, f64) = (0.05, 20.0);
+    pub const MAX_LENSES: f64 = 20000.0;
+    /// Largest surface slope plus half the AFOV (degrees): beyond this a lens
+    /// flank turns past vertical-ish and the device is no longer a graph over xy.
+    pub const MAX_FLANK_DEG: f64 = 80.0;
+    /// Largest d·κ of the offset and focal surfaces (METHOD §3 asks < 1; we
+    /// keep 10 % so base lenses have room).
+    pub const MAX_FOLD: f64 = 0.9;
+    /// Largest A·T·∂e/∂u (METHOD §4 asks < 1 − ε; ε = 0.1 keeps base lenses
+    /// at most 10 periods wide).
+    pub const MAX_SHIFT_SLOPE: f64 = 0.9;
+    pub const MAX_LEVELS: f64 = 100.0;
+}
+
+/// A design that satisfies every rule of METHOD. Geometry lives in `model.rs`.
+#[derive(Clone, Debug)]
+pub struct Design {
+    pub params: DesignParams,
+    pub standard: StandardLens,
+    pub tolerance: Tolerance,
+    /// Number of revealer lenses N = W / T.
+    pub lenses: usize,
+    /// Offset distance actually used (mm).
+    pub d: f64,
+    pub(crate) revealer_rule: ArcRule,
+    pub(crate) base_rule: ArcRule,
+    /// Outline: x of the first and last crease, and ±H/2.
+    pub outline_x: (f64, f64),
+    pub half_height: f64,
+    /// Extra layout (mm) around Ω over which the arrays are built before trimming.
+    pub margin: f64,
+    /// Base crease indices that can matter: k in this range.
+    pub base_creases: (i64, i64),
+    /// Largest principal curvature of f found on the layout (1/mm).
+    pub max_curvature: f64,
+    /// Largest slope of f on the layout (rad).
+    pub max_slope: f64,
+}
+
+fn err(
+    param: Param,
+    value: impl ToString,
+    problem: impl Into<String>,
+    fix: impl Into<String>,
+) -> DesignError {
+    DesignError {
+        param,
+        value: value.to_string(),
+        problem: problem.into(),
+        fix: fix.into(),
+    }
+}
+
+fn finite(param: Param, v: f64) -> Result<f64, DesignError> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(err(param, v, "must be a finite number", "write a number"))
+    }
+}
+
+fn in_range(
+    param: Param,
+    v: f64,
+    (lo, hi): (f64, f64),
+    unit: &str,
+    fix: &str,
+) -> Result<f64, DesignError> {
+    finite(param, v)?;
+    if v < lo || v > hi {
+        return Err(err(
+            param,
+            v,
+            format!("must be between {lo} and {hi} {unit}"),
+            fix,
+        ));
+    }
+    Ok(v)
+}
+
+impl Design {
+    pub fn new(p: DesignParams) -> Result<Design, DesignError> {
+        use limits::*;
+        let deg = |r: f64| r.to_degrees();
+        in_range(
+            Param::Period,
+            p.period,
+            PERIOD_MM,
+            "mm",
+            "choose a lens period in that range",
+        )?;
+        let w = finite(Param::Width, p.width)?;
+        let h = finite(Param::Height, p.height)?;
+        if w <= 0.0 {
+            return Err(err(
+                Param::Width,
+                w,
+                "must be positive",
+                "give the layout width in mm",
+            ));
+        }
+        if h <= 0.0 {
+            return Err(err(
+                Param::Height,
+                h,
+                "must be positive",
+                "give the layout height in mm",
+            ));
+        }
+        let periods = w / p.period;
+        let n = periods.round();
+        if (periods - n).abs() > 1e-9 * periods.max(1.0) || n < 1.0 {
+            let (lo, hi) = (
+                (periods.floor().max(1.0)) * p.period,
+                (periods.ceil().max(1.0)) * p.period,
+            );
+            return Err(err(
+                Param::Width,
+                w,
+                format!(
+                    "is {periods:.4} lens periods of {} mm; it must be a whole number",
+                    p.period
+                ),
+                format!("use a width of {lo} or {hi} mm, or change the period"),
+            ));
+        }
+        if n > MAX_LENSES {
+            return Err(err(
+                Param::Width,
+                w,
+                format!("gives {n} lenses, more than {MAX_LENSES}"),
+                "use a larger period",
+            ));
+        }
+        in_range(
+            Param::Afov,
+            deg(p.lens.afov),
+            AFOV_DEG,
+            "degrees",
+            "60 degrees is the paper's choice",
+        )?;
+        let index = finite(Param::Index, p.lens.index)?;
+        if index <= INDEX.0 || index > INDEX.1 {
+            return Err(err(
+                Param::Index,
+                index,
+                format!("must be above {} and at most {}", INDEX.0, INDEX.1),
+                "Sylgard 184 is 1.41",
+            ));
+        }
+        let base_afov = p.base.afov.unwrap_or(p.lens.afov);
+        in_range(
+            Param::BaseAfov,
+            deg(base_afov),
+            AFOV_DEG,
+            "degrees",
+            "leave it out to use the revealer's AFOV",
+        )?;
+        in_range(
+            Param::BaseA,
+            p.base.a,
+            (0.0, 1.0),
+            "",
+            "0 is the offset surface, 1 the focal surface",
+        )?;
+        in_range(
+            Param::Levels,
+            p.base.levels,
+            (0.0, MAX_LEVELS),
+            "periods",
+            "1 level is the usual choice",
+        )?;
+        let standard = StandardLens::new(p.period, p.lens.afov, index);
+        let d = match p.base.d {
+            None => standard.focal_depth,
+            Some(d) => {
+                finite(Param::BaseD, d)?;
+                if d <= 0.0 {
+                    return Err(err(
+                        Param::BaseD,
+                        d,
+                        "the base must lie below the pitch surface: d > 0",
+                        format!("use \"focal\" (D_s = {:.4} mm)", standard.focal_depth),
+                    ));
+                }
+                d
+            }
+        };
+        let tol = finite(Param::Tolerance, p.tolerance)?;
+        let tolerance = Tolerance::from_mm(tol).ok_or_else(|| {
+            err(
+                Param::Tolerance,
+                tol,
+                format!(
+                    "must be between {} and {} mm",
+                    Tolerance::MIN_MM,
+                    Tolerance::MAX_MM
+                ),
+                "0.002 mm is the reference",
+            )
+        })?;
+        if tol >= standard.sag / 2.0 {
+            return Err(err(
+                Param::Tolerance,
+                tol,
+                format!(
+                    "must be below half the lens sag ({:.4} mm), or the lenses are not represented",
+                    standard.sag
+                ),
+                format!("use at most {:.4} mm", standard.sag / 4.0),
+            ));
+        }
+        match &p.surface {
+            PitchSurface::Plane | PitchSurface::Formula(_) => {}
+            PitchSurface::Saddle { radius: r }
+            | PitchSurface::Paraboloid { radius: r }
+            | PitchSurface::Cylinder { radius: r }
+            | PitchSurface::Sphere { radius: r } => {
+                finite(Param::SurfaceRadius, *r)?;
+                if *r == 0.0 {
+                    return Err(err(
+                        Param::SurfaceRadius,
+                        r,
+                        "must not be zero",
+                        "give a radius in mm",
+                    ));
+                }
+            }
+        }
+        let revealer_rule = match p.lens.rule {
+            LensRule::ConstantAfov => ArcRule::ConstantAfov {
+                half_angle: p.lens.afov / 2.0,
+            },
+            LensRule::EqualRadius => ArcRule::EqualRadius {
+                radius: standard.radius,
+            },
+        };
+        let base_rule = ArcRule::ConstantAfov {
+            half_angle: base_afov / 2.0,
+        };
+        let n = n as usize;
+        let provisional_margin = d + (p.base.levels + 2.0) * p.period;
+        let mut design = Design {
+            tolerance,
+            lenses: n,
+            d,
+            revealer_rule,
+            base_rule,
+            outline_x: (0.0, 0.0),
+            half_height: h / 2.0,
+            margin: provisional_margin,
+            base_creases: (0, 0),
+            max_curvature: 0.0,
+            max_slope: 0.0,
+            standard,
+            params: p,
+        };
+        design.outline_x = (
+            design.surface().x_of_u(design.crease_u(0)),
+            design.surface().x_of_u(design.crease_u(n as i64)),
+        );
+        design.validate_surface(base_afov)?;
+        design.validate_profile()?;
+        // Base creases that can reach the extended layout: φ = (u + W/2 − E)/T, E ∈ [0, A·T].
+        let a_t = design.params.base.levels * design.params.period;
+        let t = design.params.period;
+        let k_lo = ((-design.margin - 1.5 * a_t) / t).floor() as i64 - 1;
+        let k_hi = ((w + design.margin + 0.5 * a_t) / t).ceil() as i64 + 1;
+        design.base_creases = (k_lo, k_hi);
+        Ok(design)
+    }
+
+    pub fn surface(&self) -> &PitchSurface {
+        &self.params.surface
+    }
+
+    /// A (cells+1)² grid over the extended layout.
+    fn grid(&self, cells: usize) -> impl Iterator<Item = DVec2> + '_ {
+        let (hw, hh, m) = (
+            self.params.width / 2.0 + self.margin,
+            self.half_height + self.margin,
+            cells as f64,
+        );
+        (0..=cells).flat_map(move |j| {
+            (0..=cells).map(move |i| {
+                DVec2::new(-hw + 2.0 * hw * i as f64 / m, -hh + 2.0 * hh * j as f64 / m)
+            })
+        })
+    }
+
+    fn validate_surface(&mut self, base_afov: f64) -> Result<(), DesignError> {
+        use limits::*;
+        let radius_param = match self.surface() {
+            PitchSurface::Formula(_) => Param::SurfaceFormula,
+            _ => Param::SurfaceRadius,
+        };
+        let radius_value = match self.surface() {
+            PitchSurface::Saddle { radius }
+            | PitchSurface::Paraboloid { radius }
+            | PitchSurface::Cylinder { radius }
+            | PitchSurface::Sphere { radius } => radius.to_string(),
+            PitchSurface::Formula(f) => f.source.clone(),
+            PitchSurface::Plane => "plane".into(),
+        };
+        let (mut kmax, mut smax, mut dmax, mut fold_at) = (0.0f64, 0.0f64, 0.0f64, DVec2::ZERO);
+        let mut worst_fold = 0.0f64;
+        let pts: Vec<DVec2> = self.grid(64).collect();
+        for q in pts {
+            let jet = self.surface().jet(q.x, q.y);
+            let n = jet.normal();
+            if !jet.p.is_finite() || !n.is_finite() || !jet.duu.is_finite() || !jet.dvv.is_finite()
+            {
+                return Err(err(
+                    radius_param,
+                    radius_value,
+                    format!("the surface is not defined at layout point ({:.2}, {:.2}) mm (the layout plus a {:.2} mm margin for the base)", q.x, q.y, self.margin),
+                    "use a larger radius or a smaller layout",
+                ));
+            }
+            if self.surface().x_of_u(q.x + 1e-6) <= self.surface().x_of_u(q.x - 1e-6) {
+                return Err(err(
+                    radius_param,
+                    radius_value,
+                    "the surface folds back over itself in x",
+                    "use a larger radius or a smaller width",
+                ));
+            }
+            let slope = n.z.clamp(-1.0, 1.0).acos();
+            let k = jet.max_abs_curvature();
+            let d_eff = self.base_offset(q.x, q.y);
+            dmax = dmax.max(d_eff);
+            if d_eff * k > worst_fold {
+                worst_fold = d_eff * k;
+                fold_at = q;
+            }
+            kmax = kmax.max(k);
+            smax = smax.max(slope);
+        }
+        self.max_curvature = kmax;
+        self.max_slope = smax;
+        let flank = (smax + self.params.lens.afov.max(base_afov) / 2.0).to_degrees();
+        if flank > MAX_FLANK_DEG {
+            return Err(err(
+                radius_param,
+                radius_value,
+                format!(
+                    "the surface slopes {:.1}° and the lenses add {:.1}°: lens flanks reach {flank:.1}°, over the {MAX_FLANK_DEG}° limit (the device must stay a graph over xy, with vertical walls)",
+                    smax.to_degrees(),
+                    self.params.lens.afov.max(base_afov).to_degrees() / 2.0
+                ),
+                "use a larger radius, a smaller layout or a smaller AFOV",
+            ));
+        }
+        if worst_fold >= MAX_FOLD {
+            let allowed = MAX_FOLD / kmax;
+            let d_note = if self.params.base.a > 0.0 {
+                " (with a > 0 the focal surface also counts)"
+            } else {
+                ""
+            };
+            return Err(err(
+                Param::BaseD,
+                format!("{:.4}", self.d),
+                format!(
+                    "the base surface folds: d·κ = {worst_fold:.3} at layout ({:.1}, {:.1}) mm, where the surface curvature is {:.4}/mm; it must stay below {MAX_FOLD}{d_note}",
+                    fold_at.x, fold_at.y, kmax
+                ),
+                format!("use d ≤ {allowed:.3} mm, or a flatter surface"),
+            ));
+        }
+        self.margin = dmax + (self.params.base.levels + 2.0) * self.params.period;
+        // Equal-radius lenses must span their chords.
+        if self.params.lens.rule == LensRule::EqualRadius {
+            let mut wmax = 0.0f64;
+            for i in 0..self.lenses as i64 {
+                for v in [-self.half_height, 0.0, self.half_height] {
+                    wmax =
+                        wmax.max((self.crease_point(i + 1, v) - self.crease_point(i, v)).length());
+                }
+            }
+            if wmax > 2.0 * self.standard.radius * 0.999 {
+                return Err(err(
+                    Param::Afov,
+                    self.params.lens.afov.to_degrees(),
+                    format!(
+                        "equal-radius lenses of r_s = {:.4} mm cannot span chords of {wmax:.4} mm",
+                        self.standard.radius
+                    ),
+                    "use constant AFOV lenses, or a smaller AFOV",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_profile(&self) -> Result<(), DesignError> {
+        let a_t = self.params.base.levels * self.params.period;
+        if a_t == 0.0 {
+            return Ok(());
+        }
+        let (hw, hh) = (
+            self.params.width / 2.0 + self.margin,
+            self.half_height + self.margin,
+        );
+        let (slope, at) = self.params.profile.max_slope_x(hw, hh);
+        let shift_slope = a_t * slope;
+        if shift_slope >= limits::MAX_SHIFT_SLOPE {
+            let max_levels = limits::MAX_SHIFT_SLOPE / (self.params.period * slope);
+            return Err(err(
+                Param::Levels,
+                self.params.base.levels,
+                format!(
+                    "the elevation is too steep for its period: A·T·∂e/∂u = {shift_slope:.3} at layout ({:.1}, {:.1}) mm; it must stay below {} or the base lenses fold",
+                    at.x,
+                    at.y,
+                    limits::MAX_SHIFT_SLOPE
+                ),
+                format!("use levels ≤ {max_levels:.3}, or more profile blur"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Worked by hand: T = 0.5 mm, α = 60°, n = 1.41.
+    /// r = T / (2 sin 30°) = 0.5; s = 0.5 (1 − cos 30°) = 0.0669872981;
+    /// F = 1.41 · 0.5 / 0.41 = 1.7195121951; D = F − s = 1.6525248970.
+    #[test]
+    fn standard_lens_by_hand() {
+        let s = StandardLens::new(0.5, 60f64.to_radians(), 1.41);
+        assert!((s.radius - 0.5).abs() < 1e-15);
+        assert!((s.sag - 0.066_987_298_107_780_7).abs() < 1e-15);
+        assert!((s.focal_length - 1.719_512_195_121_951).abs() < 1e-12);
+        assert!((s.focal_depth - 1.652_524_896_9).abs() < 1e-10);
+        // α = 90°, T = 1: r = 1/√2, s = r(1 − 1/√2), n = 1.5: F = 3r.
+        let s = StandardLens::new(1.0, 90f64.to_radians(), 1.5);
+        assert!((s.radius - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-15);
+        assert!((s.sag - (std::f64::consts::FRAC_1_SQRT_2 - 0.5)).abs() < 1e-15);
+        assert!((s.focal_length - 3.0 * std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-14);
+    }
+}

@@ -1,0 +1,416 @@
+//! Measurements of a built device, taken from its output geometry and
+//! compared with the exact model (METHOD §7.2–§7.3). None of them trusts the
+//! mesher's bookkeeping beyond "which lens is this vertex on".
+
+use crate::check::CheckResult;
+use crate::design::Design;
+use crate::lens::circumcircle;
+use crate::mesher::{DeviceMesh, Patch, Side, VertexOrigin};
+use crate::model::LensRef;
+use crate::solve::newton_2d;
+use crate::tolerance::WALL_SNAP_MM;
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+
+/// Range of a measured quantity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Range {
+    pub min: f64,
+    pub max: f64,
+}
+
+impl Range {
+    fn empty() -> Self {
+        Range {
+            min: f64::INFINITY,
+            max: f64::NEG_INFINITY,
+        }
+    }
+    fn add(&mut self, v: f64) {
+        self.min = self.min.min(v);
+        self.max = self.max.max(v);
+    }
+    fn merge(self, o: Range) -> Range {
+        Range {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+        }
+    }
+}
+
+/// Revealer lens geometry measured from mesh vertices on station rows: each
+/// such row of a lens is sampled from one exact arc, so the circle through
+/// its two crease vertices and its middle vertex is the lens's circle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LensStats {
+    /// Chord between neighbouring creases (mm).
+    pub pitch: Range,
+    pub radius: Range,
+    /// Angle the arc subtends at its centre (degrees).
+    pub afov_deg: Range,
+    pub sag: Range,
+    /// Focal depth below the pitch surface, D = n·r/(n − 1) − s (mm).
+    pub focal_depth: Range,
+    /// Largest distance of any row vertex from its fitted circle (mm).
+    pub circle_residual: f64,
+    /// Arcs measured.
+    pub arcs: usize,
+}
+
+pub fn revealer_lens_stats(design: &Design, dm: &DeviceMesh) -> LensStats {
+    let rows = dm.revealer_rows.len();
+    let n_l = design.params.lens.index;
+    let per_row: Vec<LensStats> = (1..rows.saturating_sub(1))
+        .into_par_iter()
+        .map(|r| {
+            let mut s = LensStats {
+                pitch: Range::empty(),
+                radius: Range::empty(),
+                afov_deg: Range::empty(),
+                sag: Range::empty(),
+                focal_depth: Range::empty(),
+                circle_residual: 0.0,
+                arcs: 0,
+            };
+            for (i, &cols) in dm.revealer_columns.iter().enumerate() {
+                let p = |j: usize| dm.mesh.positions[dm.revealer_vertex(r, i, j) as usize];
+                let (a, m, b) = (p(0), p(cols / 2), p(cols));
+                let Some((c, rad)) = circumcircle(a, m, b) else {
+                    continue;
+                };
+                let w = (b - a).length();
+                let afov = (a - c).angle_between(b - c);
+                let sag = rad - (rad * rad - w * w / 4.0).max(0.0).sqrt();
+                s.pitch.add(w);
+                s.radius.add(rad);
+                s.afov_deg.add(afov.to_degrees());
+                s.sag.add(sag);
+                s.focal_depth.add(n_l * rad / (n_l - 1.0) - sag);
+                for j in 0..=cols {
+                    s.circle_residual = s.circle_residual.max(((p(j) - c).length() - rad).abs());
+                }
+                s.arcs += 1;
+            }
+            s
+        })
+        .collect();
+    per_row.into_iter().fold(
+        LensStats {
+            pitch: Range::empty(),
+            radius: Range::empty(),
+            afov_deg: Range::empty(),
+            sag: Range::empty(),
+            focal_depth: Range::empty(),
+            circle_residual: 0.0,
+            arcs: 0,
+        },
+        |a, b| LensStats {
+            pitch: a.pitch.merge(b.pitch),
+            radius: a.radius.merge(b.radius),
+            afov_deg: a.afov_deg.merge(b.afov_deg),
+            sag: a.sag.merge(b.sag),
+            focal_depth: a.focal_depth.merge(b.focal_depth),
+            circle_residual: a.circle_residual.max(b.circle_residual),
+            arcs: a.arcs + b.arcs,
+        },
+    )
+}
+
+/// Which lens a vertex lies on (for a crease: the lens to its right, or the
+/// last lens for the last crease).
+fn lens_of(design: &Design, o: &VertexOrigin) -> LensRef {
+    match *o {
+        VertexOrigin::RevealerCrease { i, .. } => {
+            LensRef::Revealer(i.min(design.lenses as i64 - 1))
+        }
+        VertexOrigin::RevealerLens { i, .. } => LensRef::Revealer(i),
+        VertexOrigin::BaseCrease { k, .. } => LensRef::Base(k.min(design.base_creases.1 - 1)),
+        VertexOrigin::BaseLens { k, .. } => LensRef::Base(k),
+    }
+}
+
+/// Vertical distance (mm) from every `stride`-th vertex to its exact lens
+/// surface, found afresh: solve the lens parameters (t, v) whose point has
+/// the vertex's x and y, from a generic start, and compare z.
+pub fn vertex_on_surface(design: &Design, dm: &DeviceMesh, stride: usize) -> CheckResult {
+    let worst = (0..dm.mesh.positions.len())
+        .into_par_iter()
+        .step_by(stride.max(1))
+        .map(|vi| {
+            let p = dm.mesh.positions[vi];
+            let lens = lens_of(design, &dm.origins[vi]);
+            let solved = newton_2d(DVec2::new(0.5, p.y), &|| String::new(), |q| {
+                design
+                    .lens_point(lens, q.x, q.y)
+                    .map(|s| DVec2::new(s.x - p.x, s.y - p.y))
+                    .unwrap_or(DVec2::NAN)
+            });
+            let dist = match solved {
+                Ok(q) => design
+                    .lens_point(lens, q.x, q.y)
+                    .map(|s| (s.z - p.z).abs())
+                    .unwrap_or(f64::INFINITY),
+                Err(_) => f64::INFINITY,
+            };
+            (dist, vi)
+        })
+        .reduce(
+            || (0.0, 0),
+            |a, b| {
+                if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+                    b
+                } else {
+                    a
+                }
+            },
+        );
+    let p = dm.mesh.positions[worst.1];
+    CheckResult::at_most(
+        "vertex-on-surface",
+        worst.0,
+        1e-9,
+        "mm",
+        format!(
+            "every {}th vertex re-projected; worst at ({:.3}, {:.3}, {:.3})",
+            stride.max(1),
+            p.x,
+            p.y,
+            p.z
+        ),
+    )
+}
+
+/// Barycentric sample points inside a triangle.
+const SAMPLES: [[f64; 3]; 7] = [
+    [1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0],
+    [0.5, 0.5, 0.0],
+    [0.0, 0.5, 0.5],
+    [0.5, 0.0, 0.5],
+    [2.0 / 3.0, 1.0 / 6.0, 1.0 / 6.0],
+    [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0],
+    [1.0 / 6.0, 1.0 / 6.0, 2.0 / 3.0],
+];
+
+/// Closest point to `p` on triangle (a, b, c) (Ericson, Real-Time Collision
+/// Detection, §5.1.5).
+pub fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    a + ab * (vb * denom) + ac * (vc * denom)
+}
+
+/// Upper bound on the distance from the exact lens surfaces to the mesh
+/// (mm), sampled on every `stride`-th lens triangle: exact points at
+/// parameters interpolated over the triangle are measured against that
+/// triangle, which is part of the mesh, so the true distance to the mesh can
+/// only be smaller.
+pub fn surface_to_mesh(design: &Design, dm: &DeviceMesh, stride: usize) -> CheckResult {
+    let tri = &dm.mesh.triangles;
+    let worst = (0..tri.len())
+        .into_par_iter()
+        .step_by(stride.max(1))
+        .filter_map(|ti| {
+            let Patch::Lens(lens) = dm.patches[ti] else {
+                return None;
+            };
+            let idx = tri[ti];
+            let params: Vec<DVec2> = idx
+                .iter()
+                .map(|&v| dm.origins[v as usize].params_on(lens))
+                .collect::<Option<_>>()?;
+            let pts = idx.map(|v| dm.mesh.positions[v as usize]);
+            let mut worst = (0.0f64, DVec3::ZERO);
+            for b in SAMPLES {
+                let q = params[0] * b[0] + params[1] * b[1] + params[2] * b[2];
+                let m = pts[0] * b[0] + pts[1] * b[1] + pts[2] * b[2];
+                let Ok(p) = design.lens_point(lens, q.x, q.y) else {
+                    return Some((f64::INFINITY, m));
+                };
+                let d = (p - closest_on_triangle(p, pts[0], pts[1], pts[2])).length();
+                if d > worst.0 {
+                    worst = (d, m);
+                }
+            }
+            Some(worst)
+        })
+        .reduce(
+            || (0.0, DVec3::ZERO),
+            |a, b| {
+                if b.0 > a.0 || (b.0 == a.0 && (b.1.x, b.1.y) < (a.1.x, a.1.y)) {
+                    b
+                } else {
+                    a
+                }
+            },
+        );
+    CheckResult::at_most(
+        "surface-to-mesh",
+        worst.0,
+        design.tolerance.mm(),
+        "mm",
+        format!(
+            "7 samples on every {}th lens triangle; worst near ({:.3}, {:.3}, {:.3})",
+            stride.max(1),
+            worst.1.x,
+            worst.1.y,
+            worst.1.z
+        ),
+    )
+}
+
+/// Base creases follow E (METHOD §7.3): for every base crease vertex, find
+/// the layout point (u, v) whose base surface point has the vertex's x and y,
+/// and measure how far its phase φ(u, v) is from the crease's whole number.
+pub fn base_creases_follow_shift(design: &Design, dm: &DeviceMesh) -> CheckResult {
+    let worst = dm
+        .origins
+        .par_iter()
+        .enumerate()
+        .filter_map(|(vi, o)| {
+            let VertexOrigin::BaseCrease { k, .. } = *o else {
+                return None;
+            };
+            let p = dm.mesh.positions[vi];
+            let q = newton_2d(DVec2::new(p.x, p.y), &|| String::new(), |q| {
+                let s = design.base_surface(q.x, q.y);
+                DVec2::new(s.x - p.x, s.y - p.y)
+            });
+            let err = match q {
+                Ok(q) => (design.base_phase(q.x, q.y) - k as f64)
+                    .abs()
+                    .max((design.base_surface(q.x, q.y).z - p.z).abs() / design.params.period),
+                Err(_) => f64::INFINITY,
+            };
+            Some((err, vi))
+        })
+        .reduce(
+            || (0.0, 0),
+            |a, b| {
+                if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+                    b
+                } else {
+                    a
+                }
+            },
+        );
+    let p = dm.mesh.positions.get(worst.1).cloned().unwrap_or_default();
+    CheckResult::at_most(
+        "base-creases-follow-shift",
+        worst.0,
+        1e-8,
+        "periods",
+        format!(
+            "|φ − k| at every base crease vertex; worst near ({:.3}, {:.3})",
+            p.x, p.y
+        ),
+    )
+}
+
+/// Every wall vertex lies on its wall plane, to within [`WALL_SNAP_MM`]: a
+/// base crease that passes closer than that to a wall (it may touch it
+/// tangentially) is taken as lying on it, so no sliver triangles appear.
+pub fn walls_on_outline(design: &Design, dm: &DeviceMesh) -> CheckResult {
+    let (xl, xr) = design.outline_x;
+    let hh = design.half_height;
+    let mut worst = (0.0f64, DVec3::ZERO, Side::Left, 0u32);
+    for (t, patch) in dm.mesh.triangles.iter().zip(&dm.patches) {
+        let Patch::Wall(side) = patch else { continue };
+        for &v in t {
+            let p = dm.mesh.positions[v as usize];
+            let d = match side {
+                Side::Left => p.x - xl,
+                Side::Right => p.x - xr,
+                Side::Front => p.y + hh,
+                Side::Back => p.y - hh,
+            };
+            if d.abs() > worst.0 {
+                worst = (d.abs(), p, *side, v);
+            }
+        }
+    }
+    let (d, p, side, v) = worst;
+    CheckResult::at_most(
+        "walls-on-outline",
+        d,
+        WALL_SNAP_MM,
+        "mm",
+        format!("distance of wall vertices from their wall planes; worst on the {side:?} wall at ({:.4}, {:.4}, {:.4}), {:?}", p.x, p.y, p.z, dm.origins[v as usize]),
+    )
+}
+
+/// Neighbouring revealer lenses share their creases: the arc formula of
+/// lens i at its right end and of lens i+1 at its left end meet (checked at
+/// every station row), and the mesh uses one vertex for both.
+pub fn creases_shared(design: &Design, dm: &DeviceMesh) -> CheckResult {
+    let mut worst = 0.0f64;
+    let mut unshared = 0usize;
+    let last = dm.revealer_rows.len() - 1;
+    let mut lens_tris = vec![0usize; dm.mesh.positions.len()];
+    for (t, patch) in dm.mesh.triangles.iter().zip(&dm.patches) {
+        if let Patch::Lens(LensRef::Revealer(i)) = patch {
+            for &v in t {
+                lens_tris[v as usize] |= 1 << (i % 2);
+            }
+        }
+    }
+    for r in 1..last {
+        let v = dm.revealer_rows[r];
+        for i in 0..design.lenses.saturating_sub(1) {
+            let left = design.revealer_arc(i as i64, v).point_by_formula(1.0);
+            let right = design.revealer_arc(i as i64 + 1, v).point_by_formula(0.0);
+            worst = worst.max((left - right).length());
+            let shared = dm.revealer_vertex(r, i + 1, 0);
+            if lens_tris[shared as usize] != 0b11 {
+                unshared += 1;
+            }
+        }
+    }
+    CheckResult::at_most(
+        "creases-shared",
+        worst + unshared as f64,
+        1e-12,
+        "mm",
+        format!("largest gap between neighbouring arc ends; {unshared} crease vertices not used by both lenses"),
+    )
+}
+
+/// E over the layout Ω, sampled on a 101 × 101 grid (mm).
+pub fn shift_range(design: &Design) -> Range {
+    let mut r = Range::empty();
+    let (hw, hh) = (design.params.width / 2.0, design.half_height);
+    for j in 0..=100 {
+        for i in 0..=100 {
+            r.add(design.shift(
+                -hw + 2.0 * hw * i as f64 / 100.0,
+                -hh + 2.0 * hh * j as f64 / 100.0,
+            ));
+        }
+    }
+    r
+}

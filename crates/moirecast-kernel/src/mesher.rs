@@ -1,0 +1,913 @@
+//! A mesher straight from the exact model (METHOD §5.1, §5.3).
+//!
+//! **Guarantees.** Every vertex lies on its exact surface (to the solver
+//! residual); the mesh is closed and consistently oriented *by construction*,
+//! because every vertex on a crease, a trim line or a wall is computed once
+//! and shared by index; the triangle count is close to the fewest that meet
+//! the tolerance, because rows and columns are spaced by the local curvature.
+//! [`crate::measure`] measures all of this independently.
+//!
+//! **Layout of the mesh.**
+//! - Revealer: per lens, `n_i` columns uniform in arc angle (chordal error),
+//!   rows at *stations* v (so every interior row is an exact lens arc, and
+//!   AFOV can be measured from the vertices), plus two boundary rows solved
+//!   to lie exactly on the walls y = ±H/2. Creases project to x = const, so
+//!   the outermost creases are the x-walls' top edges.
+//! - Base: rows at exact y (solved per vertex), per lens the columns that lie
+//!   inside the outline; where a base lens is cut by an x-wall, the cut vertex
+//!   is solved onto the wall. Where a base crease crosses an x-wall, a row is
+//!   placed at the crossing so the corner is exact.
+//! - Walls: planar strips zipped between the top and bottom boundary polylines.
+
+use crate::design::Design;
+use crate::error::{KernelError, Result};
+use crate::mesh::Mesh;
+use crate::model::LensRef;
+use crate::progress::Progress;
+use crate::solve::{chord_1d, newton_1d, newton_2d};
+use crate::tolerance::WALL_SNAP_MM;
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+
+/// Share of the tolerance given to the chordal error across a lens.
+const ACROSS_SHARE: f64 = 0.5;
+/// Share of the tolerance given to the chordal error along a lens. The two
+/// add at most at a triangle's interior; the rest is margin for the twist.
+const ALONG_SHARE: f64 = 0.4;
+/// Cells of the curvature survey along y.
+const SURVEY_CELLS: usize = 256;
+
+/// Where a vertex comes from: its exact surface and parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum VertexOrigin {
+    /// On revealer crease `i` (between lenses i−1 and i) at station v.
+    RevealerCrease { i: i64, v: f64 },
+    /// Inside revealer lens `i` at arc parameter t, station v.
+    RevealerLens { i: i64, t: f64, v: f64 },
+    /// On base crease `k` at station v.
+    BaseCrease { k: i64, v: f64 },
+    /// Inside base lens `k` (including where an x-wall cuts it).
+    BaseLens { k: i64, t: f64, v: f64 },
+}
+
+impl VertexOrigin {
+    /// The (t, v) parameters of this vertex on `lens`, if it lies on it.
+    pub fn params_on(&self, lens: LensRef) -> Option<DVec2> {
+        match (*self, lens) {
+            (VertexOrigin::RevealerCrease { i, v }, LensRef::Revealer(l))
+            | (VertexOrigin::BaseCrease { k: i, v }, LensRef::Base(l)) => {
+                if i == l {
+                    Some(DVec2::new(0.0, v))
+                } else if i == l + 1 {
+                    Some(DVec2::new(1.0, v))
+                } else {
+                    None
+                }
+            }
+            (VertexOrigin::RevealerLens { i, t, v }, LensRef::Revealer(l))
+            | (VertexOrigin::BaseLens { k: i, t, v }, LensRef::Base(l)) => {
+                (i == l).then_some(DVec2::new(t, v))
+            }
+            _ => None,
+        }
+    }
+}
+
+/// A vertical side wall of the device (METHOD §5.3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Side {
+    /// x = outline_x.0
+    Left,
+    /// x = outline_x.1
+    Right,
+    /// y = −H/2
+    Front,
+    /// y = +H/2
+    Back,
+}
+
+/// The face a triangle belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Patch {
+    Lens(LensRef),
+    Wall(Side),
+}
+
+/// Counts that describe a device mesh.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeshStats {
+    pub triangles: usize,
+    pub vertices: usize,
+    pub revealer_triangles: usize,
+    pub base_triangles: usize,
+    pub wall_triangles: usize,
+    pub revealer_rows: usize,
+    pub base_rows: usize,
+    /// Rows placed where a base crease crosses an x-wall.
+    pub crossing_rows: usize,
+    pub revealer_columns: (usize, usize),
+    pub base_columns: (usize, usize),
+    /// Triangles a uniform grid needs for the same tolerance: the finest
+    /// column count on every lens and the finest row spacing everywhere.
+    pub uniform_triangles: usize,
+}
+
+/// The device mesh with the provenance of every vertex and triangle.
+#[derive(Clone, Debug)]
+pub struct DeviceMesh {
+    pub mesh: Mesh,
+    pub origins: Vec<VertexOrigin>,
+    pub patches: Vec<Patch>,
+    pub stats: MeshStats,
+    /// Revealer row stations (the first and last rows are solved onto y = ±H/2).
+    pub revealer_rows: Vec<f64>,
+    /// Columns per revealer lens.
+    pub revealer_columns: Vec<usize>,
+}
+
+impl DeviceMesh {
+    /// Index of revealer vertex (row r, lens i, column j ∈ 0..=n_i).
+    pub fn revealer_vertex(&self, r: usize, i: usize, j: usize) -> u32 {
+        let row_len = self.revealer_row_len();
+        let off: usize = self.revealer_columns[..i].iter().sum();
+        (r * row_len + off + j) as u32
+    }
+
+    fn revealer_row_len(&self) -> usize {
+        self.revealer_columns.iter().sum::<usize>() + 1
+    }
+}
+
+/// Columns needed across an arc of radius `r` spanning `angle` (rad) for a
+/// chordal error of at most `e`.
+fn columns_for(r: f64, angle: f64, e: f64) -> usize {
+    let step = if e >= r {
+        std::f64::consts::PI
+    } else {
+        2.0 * (1.0 - e / r).acos()
+    };
+    ((angle / step).ceil() as usize).max(2)
+}
+
+/// Rows between `lo` and `hi` (both included) such that a segment through
+/// cell c with second derivative K[c] has chordal error ≤ e: equidistributes
+/// √(K/8e) (rows per mm), with at least `min_segments` segments. `k` holds
+/// one value per cell of a uniform grid.
+fn rows_from_curvature(lo: f64, hi: f64, k: &[f64], e: f64, min_segments: usize) -> Vec<f64> {
+    let cells = k.len();
+    let h = (hi - lo) / cells as f64;
+    // a cell's density uses the worst of itself and its neighbours
+    let density: Vec<f64> = (0..cells)
+        .map(|c| {
+            let kk = k[c.saturating_sub(1)]
+                .max(k[c])
+                .max(k[(c + 1).min(cells - 1)]);
+            (kk / (8.0 * e)).sqrt()
+        })
+        .collect();
+    let mut cum = vec![0.0; cells + 1];
+    for c in 0..cells {
+        cum[c + 1] = cum[c] + density[c] * h;
+    }
+    let mut total = cum[cells];
+    let n = (total.ceil() as usize).max(min_segments).max(1);
+    if total == 0.0 {
+        // flat: spread the minimum rows evenly
+        for (c, v) in cum.iter_mut().enumerate() {
+            *v = c as f64 * h;
+        }
+        total = cum[cells];
+    }
+    let mut rows = Vec::with_capacity(n + 1);
+    rows.push(lo);
+    let mut c = 0;
+    for r in 1..n {
+        let target = total * r as f64 / n as f64;
+        while cum[c + 1] < target {
+            c += 1;
+        }
+        let step = cum[c + 1] - cum[c];
+        let frac = if step > 0.0 {
+            (target - cum[c]) / step
+        } else {
+            0.0
+        };
+        rows.push(lo + (c as f64 + frac) * h);
+    }
+    rows.push(hi);
+    rows.dedup_by(|a, b| *a <= *b);
+    rows
+}
+
+/// Second-difference magnitude |p(s−h) − 2p(s) + p(s+h)| / h² of a sampled
+/// curve (one value per interior sample; ends copy their neighbour).
+fn second_differences(points: &[DVec3], h: f64) -> Vec<f64> {
+    let n = points.len();
+    let mut out = vec![0.0; n];
+    for s in 1..n - 1 {
+        out[s] = (points[s - 1] - 2.0 * points[s] + points[s + 1]).length() / (h * h);
+    }
+    if n > 2 {
+        out[0] = out[1];
+        out[n - 1] = out[n - 2];
+    }
+    out
+}
+
+/// Triangulates the strip between polylines `a` and `b` (both ordered by
+/// `key`), advancing along whichever has the nearer next vertex. Triangles
+/// are (a_i, a_{i+1}, b_j) and (a_i, b_{j+1}, b_j), reversed if `flip`.
+fn zip(
+    a: &[u32],
+    b: &[u32],
+    key: &dyn Fn(u32) -> f64,
+    flip: bool,
+    patch: Patch,
+    out: &mut Vec<[u32; 3]>,
+    patches: &mut Vec<Patch>,
+) {
+    let (mut i, mut j) = (0, 0);
+    while i + 1 < a.len() || j + 1 < b.len() {
+        let advance_a = if i + 1 == a.len() {
+            false
+        } else if j + 1 == b.len() {
+            true
+        } else {
+            key(a[i + 1]) <= key(b[j + 1])
+        };
+        let tri = if advance_a {
+            i += 1;
+            [a[i - 1], a[i], b[j]]
+        } else {
+            j += 1;
+            [a[i], b[j], b[j - 1]]
+        };
+        out.push(if flip { [tri[0], tri[2], tri[1]] } else { tri });
+        patches.push(patch);
+    }
+}
+
+/// One base row: its vertices (left to right) and, per base lens, the
+/// polyline of its vertices on this row.
+struct BaseRow {
+    positions: Vec<DVec3>,
+    origins: Vec<VertexOrigin>,
+    /// Per lens k: None (absent) or local indices left to right (one index
+    /// when the lens only touches the row at a crease on a wall).
+    lenses: BTreeMap<i64, Vec<u32>>,
+    /// Local indices of the leftmost and rightmost vertex.
+    ends: (u32, u32),
+}
+
+struct Planner<'a> {
+    design: &'a Design,
+}
+
+impl<'a> Planner<'a> {
+    fn tol(&self) -> f64 {
+        self.design.tolerance.mm()
+    }
+
+    /// Survey stations: uniform over [−H/2 − pad, H/2 + pad].
+    fn survey_stations(&self, pad: f64) -> (Vec<f64>, f64) {
+        let hh = self.design.half_height + pad;
+        let h = 2.0 * hh / SURVEY_CELLS as f64;
+        ((0..=SURVEY_CELLS).map(|s| -hh + s as f64 * h).collect(), h)
+    }
+
+    /// Revealer: columns per lens, and rows (stations).
+    fn revealer_plan(&self) -> (Vec<usize>, Vec<f64>, f64) {
+        let d = self.design;
+        let (stations, h) = self.survey_stations(0.0);
+        let per_lens: Vec<(usize, Vec<f64>)> = (0..d.lenses as i64)
+            .into_par_iter()
+            .map(|i| {
+                let mut kmax = vec![0.0f64; stations.len()];
+                let mut cols = 2;
+                for &t in &[0.0, 0.5] {
+                    let pts: Vec<DVec3> = stations
+                        .iter()
+                        .map(|&v| d.revealer_point(i, t, v))
+                        .collect();
+                    for (k, s) in kmax.iter_mut().zip(second_differences(&pts, h)) {
+                        *k = k.max(s);
+                    }
+                }
+                for &v in stations.iter().step_by(SURVEY_CELLS / 8) {
+                    let arc = d.revealer_arc(i, v);
+                    cols = cols.max(columns_for(
+                        arc.radius,
+                        2.0 * arc.half_angle,
+                        ACROSS_SHARE * self.tol(),
+                    ));
+                }
+                (cols, kmax)
+            })
+            .collect();
+        let columns: Vec<usize> = per_lens.iter().map(|p| p.0).collect();
+        let k: Vec<f64> = (0..SURVEY_CELLS)
+            .map(|c| {
+                per_lens
+                    .iter()
+                    .map(|p| p.1[c].max(p.1[c + 1]))
+                    .fold(0.0, f64::max)
+            })
+            .collect();
+        let kmax = k.iter().cloned().fold(0.0, f64::max);
+        // At least one interior station row, so every lens has an exact arc
+        // in the mesh to measure.
+        let rows = rows_from_curvature(
+            -d.half_height,
+            d.half_height,
+            &k,
+            ALONG_SHARE * self.tol(),
+            2,
+        );
+        (columns, rows, kmax)
+    }
+
+    /// Base: columns per lens, curvature per y-cell, and crease samples for
+    /// finding crossings with the x-walls.
+    #[allow(clippy::type_complexity)]
+    fn base_survey(
+        &self,
+    ) -> Result<(
+        BTreeMap<i64, usize>,
+        Vec<f64>,
+        Vec<(i64, Vec<(f64, DVec3)>)>,
+    )> {
+        let d = self.design;
+        let pad = d.margin.min(d.half_height);
+        let (stations, h) = self.survey_stations(pad);
+        let (xl, xr) = d.outline_x;
+        let hh = d.half_height;
+        let (k0, k1) = d.base_creases;
+        let cell_of = |y: f64| {
+            (((y + hh) / (2.0 * hh) * SURVEY_CELLS as f64).floor() as isize)
+                .clamp(0, SURVEY_CELLS as isize - 1) as usize
+        };
+        #[allow(clippy::type_complexity)]
+        let per_lens: Vec<Result<(i64, usize, Vec<f64>, Vec<(f64, DVec3)>)>> = (k0..k1)
+            .into_par_iter()
+            .map(|k| {
+                let mut kcell = vec![0.0f64; SURVEY_CELLS];
+                let mut cols = 2;
+                let mut crease = Vec::with_capacity(stations.len());
+                let mut inside = false;
+                for &t in &[0.0, 0.5] {
+                    let pts = stations
+                        .iter()
+                        .map(|&v| d.base_point(k, t, v))
+                        .collect::<Result<Vec<_>>>()?;
+                    if t == 0.0 {
+                        crease = stations.iter().cloned().zip(pts.iter().cloned()).collect();
+                    }
+                    let sd = second_differences(&pts, h);
+                    for (p, s) in pts.iter().zip(sd) {
+                        if p.x >= xl - d.params.period
+                            && p.x <= xr + d.params.period
+                            && p.y.abs() <= hh + h
+                        {
+                            inside = true;
+                            let c = cell_of(p.y);
+                            kcell[c] = kcell[c].max(s);
+                        }
+                    }
+                }
+                if inside {
+                    for &v in stations.iter().step_by(SURVEY_CELLS / 8) {
+                        let arc = d.base_arc(k, v)?;
+                        cols = cols.max(columns_for(
+                            arc.radius,
+                            2.0 * arc.half_angle,
+                            ACROSS_SHARE * self.tol(),
+                        ));
+                    }
+                }
+                Ok((k, cols, kcell, crease))
+            })
+            .collect();
+        let mut columns = BTreeMap::new();
+        let mut k = vec![0.0f64; SURVEY_CELLS];
+        let mut creases = Vec::new();
+        for r in per_lens {
+            let (lens, cols, kcell, crease) = r?;
+            columns.insert(lens, cols);
+            for (a, b) in k.iter_mut().zip(kcell) {
+                *a = a.max(b);
+            }
+            creases.push((lens, crease));
+        }
+        // the last crease k1 bounds lens k1 − 1
+        let last = stations
+            .iter()
+            .map(|&v| Ok((v, d.base_crease_point(k1, v)?)))
+            .collect::<Result<Vec<_>>>()?;
+        creases.push((k1, last));
+        Ok((columns, k, creases))
+    }
+
+    /// Exact y-values where a base crease crosses an x-wall.
+    fn crossings(&self, creases: &[(i64, Vec<(f64, DVec3)>)]) -> Result<Vec<f64>> {
+        let d = self.design;
+        let hh = d.half_height;
+        let mut ys = Vec::new();
+        for (k, samples) in creases {
+            for wall in [d.outline_x.0, d.outline_x.1] {
+                for w in samples.windows(2) {
+                    let (s0, s1) = (w[0].1.x - wall, w[1].1.x - wall);
+                    if s0.abs() <= WALL_SNAP_MM
+                        || s1.abs() <= WALL_SNAP_MM
+                        || (s0 > 0.0) == (s1 > 0.0)
+                    {
+                        continue;
+                    }
+                    // bisect-safe start, then Newton on the crease's x
+                    let v0 = w[0].0 + (w[1].0 - w[0].0) * s0 / (s0 - s1);
+                    let v = newton_1d(
+                        v0,
+                        &|| format!("base crease {k} meeting the wall x = {wall}"),
+                        |v| {
+                            d.base_crease_point(*k, v)
+                                .map(|p| p.x - wall)
+                                .unwrap_or(f64::NAN)
+                        },
+                    )?;
+                    let y = d.base_crease_point(*k, v)?.y;
+                    if y > -hh && y < hh {
+                        ys.push(y);
+                    }
+                }
+            }
+        }
+        ys.sort_by(f64::total_cmp);
+        Ok(ys)
+    }
+}
+
+/// Inserts crossing rows into `rows` (sorted, boundaries first and last).
+/// A crossing close to an interior row replaces it, so no sliver strips appear.
+fn insert_rows(rows: &mut Vec<f64>, crossings: &[f64]) {
+    for &y in crossings {
+        let pos = rows.partition_point(|&r| r < y);
+        let (lo, hi) = (rows[pos - 1], rows[pos.min(rows.len() - 1)]);
+        let gap = hi - lo;
+        if (y - lo).abs() < 1e-9 || (hi - y).abs() < 1e-9 {
+            continue;
+        }
+        if pos - 1 > 0 && y - lo < 0.1 * gap {
+            rows[pos - 1] = y;
+        } else if pos < rows.len() - 1 && hi - y < 0.1 * gap {
+            rows[pos] = y;
+        } else {
+            rows.insert(pos, y);
+        }
+    }
+}
+
+/// Builds the device mesh of `design`.
+pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMesh> {
+    let planner = Planner { design };
+    let d = design;
+    let (xl, xr) = d.outline_x;
+    let hh = d.half_height;
+
+    progress.stage("surveying curvature", 2);
+    let (rev_columns, rev_rows, rev_kmax) = planner.revealer_plan();
+    progress.tick(1);
+    let (base_columns, base_k, crease_samples) = planner.base_survey()?;
+    progress.tick(1);
+    let mut base_rows = rows_from_curvature(-hh, hh, &base_k, ALONG_SHARE * planner.tol(), 1);
+    let uniform_base_rows = {
+        let kmax = base_k.iter().cloned().fold(0.0, f64::max);
+        ((2.0 * hh) * (kmax / (8.0 * ALONG_SHARE * planner.tol())).sqrt())
+            .ceil()
+            .max(1.0) as usize
+    };
+    let crossings = planner.crossings(&crease_samples)?;
+    insert_rows(&mut base_rows, &crossings);
+
+    // ---- revealer vertices -------------------------------------------------
+    let n = d.lenses;
+    let row_len = rev_columns.iter().sum::<usize>() + 1;
+    let last_row = rev_rows.len() - 1;
+    progress.stage("revealer vertices", rev_rows.len() as u64);
+    let rev_vertices: Vec<Vec<(DVec3, VertexOrigin)>> = rev_rows
+        .par_iter()
+        .enumerate()
+        .map(|(r, &v)| {
+            let boundary = (r == 0 || r == last_row).then_some(if r == 0 { -hh } else { hh });
+            let mut out = Vec::with_capacity(row_len);
+            for i in 0..n {
+                let cols = rev_columns[i];
+                let arc = d.revealer_arc(i as i64, v);
+                let first = if i == 0 { 0 } else { 1 };
+                for j in first..=cols {
+                    let t = j as f64 / cols as f64;
+                    let (p, vv) = match boundary {
+                        None => (arc.point(t), v),
+                        Some(y) => {
+                            let vv = d.solve_station_for_y(LensRef::Revealer(i as i64), t, y, v)?;
+                            (d.revealer_point(i as i64, t, vv), vv)
+                        }
+                    };
+                    let origin = if j == 0 {
+                        VertexOrigin::RevealerCrease { i: i as i64, v: vv }
+                    } else if j == cols {
+                        VertexOrigin::RevealerCrease {
+                            i: i as i64 + 1,
+                            v: vv,
+                        }
+                    } else {
+                        VertexOrigin::RevealerLens {
+                            i: i as i64,
+                            t,
+                            v: vv,
+                        }
+                    };
+                    out.push((p, origin));
+                }
+            }
+            progress.tick(1);
+            Ok(out)
+        })
+        .collect::<Result<_>>()?;
+    // rows must not cross: every column's y increases from row to row
+    for r in 0..last_row {
+        for (a, b) in rev_vertices[r].iter().zip(&rev_vertices[r + 1]) {
+            if b.0.y <= a.0.y {
+                return Err(KernelError::MeshCheck {
+                    name: "rows-ordered",
+                    detail: format!("revealer rows {r} and {} cross at x = {:.4}", r + 1, a.0.x),
+                });
+            }
+        }
+    }
+
+    // ---- base vertices -----------------------------------------------------
+    progress.stage("base vertices", base_rows.len() as u64);
+    let base_row_data: Vec<BaseRow> = base_rows
+        .par_iter()
+        .map(|&y| {
+            let row = base_row(d, &base_columns, y, xl, xr);
+            progress.tick(1);
+            row
+        })
+        .collect::<Result<_>>()?;
+
+    // ---- assemble ----------------------------------------------------------
+    progress.stage("triangles", 1);
+    let rev_count = rev_rows.len() * row_len;
+    let mut positions = Vec::with_capacity(
+        rev_count
+            + base_row_data
+                .iter()
+                .map(|r| r.positions.len())
+                .sum::<usize>(),
+    );
+    let mut origins = Vec::with_capacity(positions.capacity());
+    for row in &rev_vertices {
+        for (p, o) in row {
+            positions.push(*p);
+            origins.push(*o);
+        }
+    }
+    let mut base_offsets = Vec::with_capacity(base_row_data.len());
+    for row in &base_row_data {
+        base_offsets.push(positions.len() as u32);
+        positions.extend_from_slice(&row.positions);
+        origins.extend_from_slice(&row.origins);
+    }
+    let mut dm = DeviceMesh {
+        mesh: Mesh {
+            positions,
+            triangles: Vec::new(),
+        },
+        origins,
+        patches: Vec::new(),
+        stats: MeshStats::default(),
+        revealer_rows: rev_rows
+            .iter()
+            .enumerate()
+            .map(|(r, &v)| {
+                if r == 0 {
+                    -hh
+                } else if r == last_row {
+                    hh
+                } else {
+                    v
+                }
+            })
+            .collect(),
+        revealer_columns: rev_columns.clone(),
+    };
+    let mut tris = Vec::new();
+    let mut patches = Vec::new();
+    let key_t =
+        |o: &VertexOrigin, lens: LensRef| o.params_on(lens).map(|p| p.x).unwrap_or(f64::NAN);
+
+    // revealer strips
+    for r in 0..last_row {
+        for i in 0..n {
+            let a: Vec<u32> = (0..=rev_columns[i])
+                .map(|j| dm.revealer_vertex(r, i, j))
+                .collect();
+            let b: Vec<u32> = (0..=rev_columns[i])
+                .map(|j| dm.revealer_vertex(r + 1, i, j))
+                .collect();
+            let lens = LensRef::Revealer(i as i64);
+            let origins = &dm.origins;
+            zip(
+                &a,
+                &b,
+                &|v| key_t(&origins[v as usize], lens),
+                false,
+                Patch::Lens(lens),
+                &mut tris,
+                &mut patches,
+            );
+        }
+    }
+    let revealer_triangles = tris.len();
+
+    // base strips
+    for r in 0..base_row_data.len() - 1 {
+        let (ra, rb) = (&base_row_data[r], &base_row_data[r + 1]);
+        let (oa, ob) = (base_offsets[r], base_offsets[r + 1]);
+        let lenses: std::collections::BTreeSet<i64> =
+            ra.lenses.keys().chain(rb.lenses.keys()).cloned().collect();
+        for k in lenses {
+            let (pa, pb) = (ra.lenses.get(&k), rb.lenses.get(&k));
+            let (a, b) = match (pa, pb) {
+                (Some(a), Some(b)) if a.len() > 1 || b.len() > 1 => (a, b),
+                (Some(a), None) | (None, Some(a)) if a.len() > 1 => {
+                    return Err(KernelError::MeshCheck {
+                        name: "base-crossings",
+                        detail: format!("base lens {k} enters the outline between y = {} and {} without a crease crossing being found", base_rows[r], base_rows[r + 1]),
+                    })
+                }
+                _ => continue,
+            };
+            let a: Vec<u32> = a.iter().map(|i| i + oa).collect();
+            let b: Vec<u32> = b.iter().map(|i| i + ob).collect();
+            let lens = LensRef::Base(k);
+            let origins = &dm.origins;
+            zip(
+                &a,
+                &b,
+                &|v| key_t(&origins[v as usize], lens),
+                true,
+                Patch::Lens(lens),
+                &mut tris,
+                &mut patches,
+            );
+        }
+    }
+    let base_triangles = tris.len() - revealer_triangles;
+
+    // walls
+    let pos = &dm.mesh.positions;
+    let key_x = |v: u32| pos[v as usize].x;
+    let key_y = |v: u32| pos[v as usize].y;
+    let left_top: Vec<u32> = (0..=last_row)
+        .map(|r| dm.revealer_vertex(r, 0, 0))
+        .collect();
+    let right_top: Vec<u32> = (0..=last_row)
+        .map(|r| dm.revealer_vertex(r, n - 1, rev_columns[n - 1]))
+        .collect();
+    let left_bottom: Vec<u32> = base_row_data
+        .iter()
+        .zip(&base_offsets)
+        .map(|(row, o)| row.ends.0 + o)
+        .collect();
+    let right_bottom: Vec<u32> = base_row_data
+        .iter()
+        .zip(&base_offsets)
+        .map(|(row, o)| row.ends.1 + o)
+        .collect();
+    let front_top: Vec<u32> = (0..row_len as u32).collect();
+    let back_top: Vec<u32> = (0..row_len as u32)
+        .map(|c| c + (last_row * row_len) as u32)
+        .collect();
+    let row_span = |r: usize| {
+        let row = &base_row_data[r];
+        (row.ends.0..=row.ends.1)
+            .map(|i| i + base_offsets[r])
+            .collect::<Vec<u32>>()
+    };
+    let front_bottom = row_span(0);
+    let back_bottom = row_span(base_row_data.len() - 1);
+    zip(
+        &left_bottom,
+        &left_top,
+        &key_y,
+        true,
+        Patch::Wall(Side::Left),
+        &mut tris,
+        &mut patches,
+    );
+    zip(
+        &right_bottom,
+        &right_top,
+        &key_y,
+        false,
+        Patch::Wall(Side::Right),
+        &mut tris,
+        &mut patches,
+    );
+    zip(
+        &front_bottom,
+        &front_top,
+        &key_x,
+        false,
+        Patch::Wall(Side::Front),
+        &mut tris,
+        &mut patches,
+    );
+    zip(
+        &back_bottom,
+        &back_top,
+        &key_x,
+        true,
+        Patch::Wall(Side::Back),
+        &mut tris,
+        &mut patches,
+    );
+    let wall_triangles = tris.len() - revealer_triangles - base_triangles;
+    progress.tick(1);
+
+    let rev_cols_max = *rev_columns.iter().max().unwrap_or(&0);
+    let base_cols_inside: Vec<usize> = base_columns.values().cloned().collect();
+    let base_cols_max = *base_cols_inside.iter().max().unwrap_or(&0);
+    let uniform_rev_rows = ((2.0 * hh) * (rev_kmax / (8.0 * ALONG_SHARE * planner.tol())).sqrt())
+        .ceil()
+        .max(1.0) as usize;
+    let base_lenses_inside = base_row_data
+        .iter()
+        .map(|r| r.lenses.values().filter(|l| l.len() > 1).count())
+        .max()
+        .unwrap_or(0);
+    dm.stats = MeshStats {
+        triangles: tris.len(),
+        vertices: dm.mesh.positions.len(),
+        revealer_triangles,
+        base_triangles,
+        wall_triangles,
+        revealer_rows: rev_rows.len(),
+        base_rows: base_rows.len(),
+        crossing_rows: crossings.len(),
+        revealer_columns: (*rev_columns.iter().min().unwrap_or(&0), rev_cols_max),
+        base_columns: (*base_cols_inside.iter().min().unwrap_or(&0), base_cols_max),
+        uniform_triangles: 2 * n * rev_cols_max * uniform_rev_rows
+            + 2 * base_lenses_inside * base_cols_max * uniform_base_rows
+            + wall_triangles,
+    };
+    dm.mesh.triangles = tris;
+    dm.patches = patches;
+    Ok(dm)
+}
+
+/// Computes one base row at exact height y: crease vertices, cut vertices on
+/// the x-walls and interior vertices, each solved onto its exact surface.
+fn base_row(
+    d: &Design,
+    columns: &BTreeMap<i64, usize>,
+    y: f64,
+    xl: f64,
+    xr: f64,
+) -> Result<BaseRow> {
+    let (k0, k1) = d.base_creases;
+    // crease vertices (k0..=k1), solved to lie at height y
+    let mut creases: Vec<(f64, DVec3)> = Vec::with_capacity((k1 - k0 + 1) as usize);
+    let mut v_guess = y;
+    for k in k0..=k1 {
+        let v = newton_1d(v_guess, &|| format!("base crease {k} at y = {y}"), |v| {
+            d.base_crease_point(k, v)
+                .map(|p| p.y - y)
+                .unwrap_or(f64::NAN)
+        })?;
+        v_guess = v;
+        creases.push((v, d.base_crease_point(k, v)?));
+    }
+    let crease = |k: i64| creases[(k - k0) as usize];
+    let mut row = BaseRow {
+        positions: Vec::new(),
+        origins: Vec::new(),
+        lenses: BTreeMap::new(),
+        ends: (u32::MAX, 0),
+    };
+    let mut crease_index: BTreeMap<i64, u32> = BTreeMap::new();
+    let push = |row: &mut BaseRow, p: DVec3, o: VertexOrigin| -> u32 {
+        row.positions.push(p);
+        row.origins.push(o);
+        (row.positions.len() - 1) as u32
+    };
+    let snap = |x: f64, wall: f64| (x - wall).abs() <= WALL_SNAP_MM;
+    for k in k0..k1 {
+        let (c0, c1) = (crease(k), crease(k + 1));
+        let (x0, x1) = (c0.1.x, c1.1.x);
+        let mut crease_vertex = |row: &mut BaseRow, kk: i64| -> u32 {
+            if let Some(&i) = crease_index.get(&kk) {
+                return i;
+            }
+            let (v, p) = crease(kk);
+            let i = push(row, p, VertexOrigin::BaseCrease { k: kk, v });
+            crease_index.insert(kk, i);
+            i
+        };
+        if x1 <= xl + WALL_SNAP_MM {
+            if snap(x1, xl) {
+                let i = crease_vertex(&mut row, k + 1);
+                row.lenses.insert(k, vec![i]);
+            }
+            continue;
+        }
+        if x0 >= xr - WALL_SNAP_MM {
+            if snap(x0, xr) {
+                let i = crease_vertex(&mut row, k);
+                row.lenses.insert(k, vec![i]);
+            }
+            continue;
+        }
+        let cols = *columns
+            .get(&k)
+            .ok_or_else(|| KernelError::Solver(format!("base lens {k} was not surveyed")))?;
+        let cut = |wall: f64, t0: f64| -> Result<(DVec3, VertexOrigin, f64)> {
+            let guess = DVec2::new(t0, 0.5 * (c0.0 + c1.0));
+            let p = newton_2d(
+                guess,
+                &|| format!("base lens {k} meeting the wall x = {wall} at y = {y}"),
+                |q| {
+                    d.base_point(k, q.x, q.y)
+                        .map(|p| DVec2::new(p.x - wall, p.y - y))
+                        .unwrap_or(DVec2::NAN)
+                },
+            )?;
+            let pt = d.base_point(k, p.x, p.y)?;
+            Ok((pt, VertexOrigin::BaseLens { k, t: p.x, v: p.y }, p.x))
+        };
+        let mut poly = Vec::with_capacity(cols + 1);
+        let t_lo = if x0 >= xl - WALL_SNAP_MM {
+            poly.push(crease_vertex(&mut row, k));
+            0.0
+        } else {
+            let (p, o, t) = cut(xl, (xl - x0) / (x1 - x0))?;
+            poly.push(push(&mut row, p, o));
+            t
+        };
+        let (right_cut, t_hi) = if x1 <= xr + WALL_SNAP_MM {
+            (None, 1.0)
+        } else {
+            let (p, o, t) = cut(xr, (xr - x0) / (x1 - x0))?;
+            (Some((p, o)), t)
+        };
+        let margin = 0.25 / cols as f64;
+        // Interior vertices: the station v at which (t, v) has height y
+        // varies smoothly from crease to crease, so start from the linear
+        // blend with the creases' dy/dv, and warm-start the crease solves.
+        let near = (
+            Some(d.base_crease_u(k, c0.0)?),
+            Some(d.base_crease_u(k + 1, c1.0)?),
+        );
+        let slope = {
+            let h = 1e-6;
+            let y = |v: f64| d.base_crease_point(k, v).map(|p| p.y).unwrap_or(f64::NAN);
+            (y(c0.0 + h) - y(c0.0 - h)) / (2.0 * h)
+        };
+        for j in 1..cols {
+            let t = j as f64 / cols as f64;
+            if t <= t_lo + margin || t >= t_hi - margin {
+                continue;
+            }
+            let v0 = c0.0 + (c1.0 - c0.0) * t;
+            let point = |v: f64| d.base_arc_near(k, v, near).map(|a| a.point(t));
+            let v = chord_1d(
+                v0,
+                Some(slope),
+                &|| format!("base lens {k} at t = {t}, y = {y}"),
+                |v| point(v).map(|p| p.y - y).unwrap_or(f64::NAN),
+            )?;
+            poly.push(push(
+                &mut row,
+                point(v)?,
+                VertexOrigin::BaseLens { k, t, v },
+            ));
+        }
+        match right_cut {
+            None => poly.push(crease_vertex(&mut row, k + 1)),
+            Some((p, o)) => poly.push(push(&mut row, p, o)),
+        }
+        row.ends.0 = row.ends.0.min(poly[0]);
+        row.ends.1 = row.ends.1.max(*poly.last().unwrap());
+        row.lenses.insert(k, poly);
+    }
+    if row.ends.0 == u32::MAX {
+        return Err(KernelError::MeshCheck {
+            name: "base-row",
+            detail: format!("no base lens lies inside the outline at y = {y}"),
+        });
+    }
+    // vertices were pushed left to right, so the row's span is ends.0..=ends.1
+    Ok(row)
+}

@@ -1,0 +1,169 @@
+//! The exact device model (METHOD §2–§5.1): revealer lenses over f, base
+//! surfaces, base creases and base lenses. Every function here is exact up
+//! to floating-point round-off and the convergence of its root finder.
+
+use crate::design::Design;
+use crate::error::Result;
+use crate::lens::LensArc;
+use crate::solve::bracketed_newton;
+use glam::DVec3;
+
+impl Design {
+    /// Layout u of revealer crease i (centred layout): u_i = −W/2 + i·T.
+    pub fn crease_u(&self, i: i64) -> f64 {
+        -self.params.width / 2.0 + i as f64 * self.params.period
+    }
+
+    /// Revealer crease curve P_i(v) = f(u_i, v).
+    pub fn crease_point(&self, i: i64, v: f64) -> DVec3 {
+        self.surface().point(self.crease_u(i), v)
+    }
+
+    /// Revealer lens i at station v (METHOD §2): from P_i to P_{i+1},
+    /// bulging along the normal at the lens middle.
+    pub fn revealer_arc(&self, i: i64, v: f64) -> LensArc {
+        let (p0, p1) = (self.crease_point(i, v), self.crease_point(i + 1, v));
+        let mid_u = self.crease_u(i) + 0.5 * self.params.period;
+        LensArc::new(p0, p1, self.surface().normal(mid_u, v), self.revealer_rule)
+    }
+
+    /// Local width factor λ = |f(u + T/2) − f(u − T/2)| / T (METHOD §3).
+    pub fn width_factor(&self, u: f64, v: f64) -> f64 {
+        let t = self.params.period;
+        (self.surface().point(u + t / 2.0, v) - self.surface().point(u - t / 2.0, v)).length() / t
+    }
+
+    /// Offset of the interpolated base surface below f along n:
+    /// (1 − a)·d + a·D_s·λ (METHOD §3, eq 8).
+    pub fn base_offset(&self, u: f64, v: f64) -> f64 {
+        let a = self.params.base.a;
+        let focal = if a > 0.0 {
+            self.standard.focal_depth * self.width_factor(u, v)
+        } else {
+            0.0
+        };
+        (1.0 - a) * self.d + a * focal
+    }
+
+    /// Base surface s(u, v) = f − ((1 − a)·d + a·D_s·λ)·n.
+    pub fn base_surface(&self, u: f64, v: f64) -> DVec3 {
+        self.surface().point(u, v) - self.base_offset(u, v) * self.surface().normal(u, v)
+    }
+
+    /// Unit normal of s, on the same side as n. An offset surface (a = 0)
+    /// shares f's normal exactly; otherwise central differences of s (only
+    /// the bulge direction of base lenses depends on it).
+    pub fn base_normal(&self, u: f64, v: f64) -> DVec3 {
+        if self.params.base.a == 0.0 {
+            return self.surface().normal(u, v);
+        }
+        let h = 1e-5;
+        let su = self.base_surface(u + h, v) - self.base_surface(u - h, v);
+        let sv = self.base_surface(u, v + h) - self.base_surface(u, v - h);
+        su.cross(sv).normalize()
+    }
+
+    /// Base shift E(u, v) = A·T·e(u, v) (mm).
+    pub fn shift(&self, u: f64, v: f64) -> f64 {
+        self.params.base.levels * self.params.period * self.params.profile.value(u, v)
+    }
+
+    /// Base phase φ(u, v) = (u + W/2 − E(u, v)) / T (METHOD §4).
+    pub fn base_phase(&self, u: f64, v: f64) -> f64 {
+        (u + self.params.width / 2.0 - self.shift(u, v)) / self.params.period
+    }
+
+    /// Layout u of base crease k at station v: the root of φ(u, v) = k.
+    /// φ increases with u (validated), and E ∈ [0, A·T] brackets the root.
+    pub fn base_crease_u(&self, k: i64, v: f64) -> Result<f64> {
+        self.base_crease_u_near(k, v, None)
+    }
+
+    /// [`base_crease_u`](Self::base_crease_u) starting from `start` (a nearby
+    /// solution), which saves most Newton steps.
+    pub fn base_crease_u_near(&self, k: i64, v: f64, start: Option<f64>) -> Result<f64> {
+        let (t, a_t) = (
+            self.params.period,
+            self.params.base.levels * self.params.period,
+        );
+        let u0 = k as f64 * t - self.params.width / 2.0;
+        if a_t == 0.0 {
+            return Ok(u0);
+        }
+        let profile = &self.params.profile;
+        let g = |u: f64| {
+            let (e, grad) = profile.value_grad(u, v);
+            (u - u0 - a_t * e, 1.0 - a_t * grad.x)
+        };
+        let x0 = start.unwrap_or_else(|| u0 + a_t * profile.value(u0, v));
+        bracketed_newton(
+            u0 - 0.5 * a_t,
+            u0 + 1.5 * a_t,
+            x0,
+            1e-13,
+            &|| format!("base crease {k} at v = {v}"),
+            g,
+        )
+    }
+
+    /// Base crease curve C_k(v) = s(u_k(v), v).
+    pub fn base_crease_point(&self, k: i64, v: f64) -> Result<DVec3> {
+        Ok(self.base_surface(self.base_crease_u(k, v)?, v))
+    }
+
+    /// Base lens k at station v (METHOD §5.1): from C_k to C_{k+1}, bulging
+    /// along −n_s at the middle of its layout span, away from the body.
+    pub fn base_arc(&self, k: i64, v: f64) -> Result<LensArc> {
+        self.base_arc_near(k, v, (None, None))
+    }
+
+    /// [`base_arc`](Self::base_arc) with nearby crease solutions to start from.
+    pub fn base_arc_near(
+        &self,
+        k: i64,
+        v: f64,
+        near: (Option<f64>, Option<f64>),
+    ) -> Result<LensArc> {
+        let (u0, u1) = (
+            self.base_crease_u_near(k, v, near.0)?,
+            self.base_crease_u_near(k + 1, v, near.1)?,
+        );
+        let (p0, p1) = (self.base_surface(u0, v), self.base_surface(u1, v));
+        let toward = -self.base_normal(0.5 * (u0 + u1), v);
+        Ok(LensArc::new(p0, p1, toward, self.base_rule))
+    }
+
+    /// A point of base lens k: parameter t ∈ [0, 1] across, station v along.
+    pub fn base_point(&self, k: i64, t: f64, v: f64) -> Result<DVec3> {
+        Ok(self.base_arc(k, v)?.point(t))
+    }
+
+    /// A point of revealer lens i.
+    pub fn revealer_point(&self, i: i64, t: f64, v: f64) -> DVec3 {
+        self.revealer_arc(i, v).point(t)
+    }
+
+    /// Which lens surface of the device is meant.
+    pub fn lens_point(&self, lens: LensRef, t: f64, v: f64) -> Result<DVec3> {
+        match lens {
+            LensRef::Revealer(i) => Ok(self.revealer_point(i, t, v)),
+            LensRef::Base(k) => self.base_point(k, t, v),
+        }
+    }
+
+    /// Solves the station v at which lens point (t, ·) has y = `y`.
+    pub fn solve_station_for_y(&self, lens: LensRef, t: f64, y: f64, v0: f64) -> Result<f64> {
+        crate::solve::newton_1d(v0, &|| format!("{lens:?} at t = {t}, y = {y}"), |v| {
+            self.lens_point(lens, t, v)
+                .map(|p| p.y - y)
+                .unwrap_or(f64::NAN)
+        })
+    }
+}
+
+/// A lens of the device: revealer lens i or base lens k.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum LensRef {
+    Revealer(i64),
+    Base(i64),
+}

@@ -1,0 +1,489 @@
+//! Elevation profiles e(x, y) ∈ [0, 1] over the layout (METHOD §4).
+//!
+//! Profiles are evaluated in centred layout coordinates and must be C¹:
+//! the base creases solve `u − E(u, v) = kT` with Newton, and the base lens
+//! surfaces inherit e's smoothness. Sampled profiles use Catmull-Rom bicubic
+//! interpolation, which is C¹.
+
+use glam::DVec2;
+
+/// A grey image handed to the kernel: luminance in [0, 1], composited over
+/// white where the source had alpha (so transparent = white), row 0 at the top.
+#[derive(Clone, Debug)]
+pub struct Raster {
+    pub width: usize,
+    pub height: usize,
+    pub luminance: Vec<f32>,
+}
+
+/// How an image becomes an elevation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ProfileMode {
+    /// e = luminance (bright is high).
+    Gray,
+    /// Bilevel shape: dark pixels (luminance < threshold) are the shape.
+    /// e = 0.5 on its outline, rising to 1 at its deepest point and falling to
+    /// 0 at the same distance outside, so level lines run parallel to the outline.
+    Shape { threshold: f64 },
+}
+
+/// The elevation profile.
+#[derive(Clone, Debug)]
+pub enum Profile {
+    /// e ≡ 0: an unshifted base.
+    Flat,
+    /// Concentric rings: e = ½ − ½ cos(2πρ/λ), ρ from the layout centre.
+    Rings { wavelength: f64 },
+    /// Linear ramp along direction `angle` (rad from +x), 0 to 1 across the layout.
+    Ramp { angle: f64, length: f64 },
+    /// Gaussian bump e = exp(−ρ²/2σ²) at the layout centre.
+    Bump { sigma: f64 },
+    /// An image, fitted into the layout, blurred and resampled.
+    Sampled(SampledProfile),
+}
+
+impl Profile {
+    /// A ramp across a layout of size `width × height` along `angle`.
+    pub fn ramp(angle: f64, width: f64, height: f64) -> Profile {
+        let length = width * angle.cos().abs() + height * angle.sin().abs();
+        Profile::Ramp { angle, length }
+    }
+
+    /// e(x, y).
+    pub fn value(&self, x: f64, y: f64) -> f64 {
+        match self {
+            Profile::Flat => 0.0,
+            Profile::Rings { wavelength } => {
+                0.5 - 0.5 * (std::f64::consts::TAU * x.hypot(y) / wavelength).cos()
+            }
+            Profile::Ramp { angle, length } => 0.5 + (x * angle.cos() + y * angle.sin()) / length,
+            Profile::Bump { sigma } => (-(x * x + y * y) / (2.0 * sigma * sigma)).exp(),
+            Profile::Sampled(s) => s.eval(x, y).0,
+        }
+    }
+
+    /// (e, ∇e) at (x, y).
+    pub fn value_grad(&self, x: f64, y: f64) -> (f64, DVec2) {
+        match self {
+            Profile::Flat => (0.0, DVec2::ZERO),
+            Profile::Rings { wavelength } => {
+                let rho = x.hypot(y);
+                let k = std::f64::consts::TAU / wavelength;
+                let e = 0.5 - 0.5 * (k * rho).cos();
+                if rho == 0.0 {
+                    return (e, DVec2::ZERO);
+                }
+                // d/dρ = ½ k sin(kρ); sin(kρ)/ρ is smooth at 0
+                let g = 0.5 * k * (k * rho).sin() / rho;
+                (e, DVec2::new(g * x, g * y))
+            }
+            Profile::Ramp { angle, length } => {
+                let d = DVec2::new(angle.cos(), angle.sin()) / *length;
+                (self.value(x, y), d)
+            }
+            Profile::Bump { sigma } => {
+                let e = self.value(x, y);
+                (e, DVec2::new(-x, -y) * (e / (sigma * sigma)))
+            }
+            Profile::Sampled(s) => s.eval(x, y),
+        }
+    }
+
+    /// Largest |∂e/∂x| anywhere (1/mm) and where: it limits the base shift
+    /// (METHOD §4, φ must increase with u).
+    pub fn max_slope_x(&self, half_w: f64, half_h: f64) -> (f64, DVec2) {
+        match self {
+            Profile::Flat => (0.0, DVec2::ZERO),
+            Profile::Rings { wavelength } => (
+                std::f64::consts::PI / wavelength,
+                DVec2::new(wavelength / 4.0, 0.0),
+            ),
+            Profile::Ramp { angle, length } => (angle.cos().abs() / length, DVec2::ZERO),
+            Profile::Bump { sigma } => (
+                1.0 / (sigma * std::f64::consts::E.sqrt()),
+                DVec2::new(*sigma, 0.0),
+            ),
+            Profile::Sampled(s) => s.max_slope_x(half_w, half_h),
+        }
+    }
+}
+
+/// A regular grid of elevation values with Catmull-Rom interpolation.
+#[derive(Clone, Debug)]
+pub struct SampledProfile {
+    origin: DVec2,
+    spacing: f64,
+    nx: usize,
+    ny: usize,
+    values: Vec<f64>,
+}
+
+fn catmull_rom(t: f64) -> ([f64; 4], [f64; 4]) {
+    let (t2, t3) = (t * t, t * t * t);
+    let w = [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ];
+    let d = [
+        0.5 * (-3.0 * t2 + 4.0 * t - 1.0),
+        0.5 * (9.0 * t2 - 10.0 * t),
+        0.5 * (-9.0 * t2 + 8.0 * t + 1.0),
+        0.5 * (3.0 * t2 - 2.0 * t),
+    ];
+    (w, d)
+}
+
+impl SampledProfile {
+    /// Fits `raster` into the layout `width × height` (mm) keeping its aspect
+    /// ratio (centred, "contain"), turns it into an elevation by `mode`,
+    /// blurs it with a Gaussian of σ = `blur` mm and keeps a grid fine enough
+    /// for both the image and the blur. Outside the image the border repeats.
+    /// Errors are plain messages; the caller names the parameter.
+    pub fn from_raster(
+        raster: &Raster,
+        mode: ProfileMode,
+        invert: bool,
+        blur: f64,
+        width: f64,
+        height: f64,
+    ) -> Result<Self, String> {
+        if raster.width == 0 || raster.height == 0 {
+            return Err("the image is empty".into());
+        }
+        let px = (width / raster.width as f64).min(height / raster.height as f64); // mm per pixel
+        let mut spacing = if blur > 0.0 { px.min(blur / 2.0) } else { px };
+        spacing = spacing.max(width.max(height) / 1024.0);
+        let margin = 3.0 * blur + 4.0 * spacing;
+        let origin = DVec2::new(-width / 2.0 - margin, -height / 2.0 - margin);
+        let nx = ((width + 2.0 * margin) / spacing).ceil() as usize + 1;
+        let ny = ((height + 2.0 * margin) / spacing).ceil() as usize + 1;
+        let lum = |x: f64, y: f64| -> f64 {
+            // bilinear in pixel-centre coordinates, border clamped
+            let fx =
+                (x / px + raster.width as f64 / 2.0 - 0.5).clamp(0.0, (raster.width - 1) as f64);
+            let fy =
+                (raster.height as f64 / 2.0 - y / px - 0.5).clamp(0.0, (raster.height - 1) as f64);
+            let (i0, j0) = (fx.floor() as usize, fy.floor() as usize);
+            let (i1, j1) = (
+                (i0 + 1).min(raster.width - 1),
+                (j0 + 1).min(raster.height - 1),
+            );
+            let (tx, ty) = (fx - i0 as f64, fy - j0 as f64);
+            let at = |i: usize, j: usize| raster.luminance[j * raster.width + i] as f64;
+            let top = at(i0, j0) * (1.0 - tx) + at(i1, j0) * tx;
+            let bot = at(i0, j1) * (1.0 - tx) + at(i1, j1) * tx;
+            top * (1.0 - ty) + bot * ty
+        };
+        let mut values = vec![0.0; nx * ny];
+        for j in 0..ny {
+            for i in 0..nx {
+                let l = lum(origin.x + i as f64 * spacing, origin.y + j as f64 * spacing);
+                values[j * nx + i] = if invert { 1.0 - l } else { l };
+            }
+        }
+        if let ProfileMode::Shape { threshold } = mode {
+            let inside: Vec<bool> = values.iter().map(|&l| l < threshold).collect();
+            if !inside.iter().any(|&b| b) {
+                return Err(format!(
+                    "no pixel is darker than the threshold {threshold}: the shape is empty"
+                ));
+            }
+            if inside.iter().all(|&b| b) {
+                return Err(format!("every pixel is darker than the threshold {threshold}: the shape has no outline"));
+            }
+            let d_out = distance_transform(nx, ny, &inside); // distance of outside cells to the shape
+            let not_inside: Vec<bool> = inside.iter().map(|b| !b).collect();
+            let d_in = distance_transform(nx, ny, &not_inside);
+            let signed: Vec<f64> = (0..nx * ny)
+                .map(|c| if inside[c] { d_in[c] - 0.5 } else { 0.5 - d_out[c] } * spacing)
+                .collect();
+            let depth = signed.iter().cloned().fold(0.0, f64::max);
+            for (v, s) in values.iter_mut().zip(&signed) {
+                *v = (0.5 + s / (2.0 * depth)).clamp(0.0, 1.0);
+            }
+        }
+        if blur > 0.0 {
+            gaussian_blur(&mut values, nx, ny, blur / spacing);
+        }
+        Ok(SampledProfile {
+            origin,
+            spacing,
+            nx,
+            ny,
+            values,
+        })
+    }
+
+    /// Grid spacing (mm).
+    pub fn spacing(&self) -> f64 {
+        self.spacing
+    }
+
+    fn at(&self, i: isize, j: isize) -> f64 {
+        let i = i.clamp(0, self.nx as isize - 1) as usize;
+        let j = j.clamp(0, self.ny as isize - 1) as usize;
+        self.values[j * self.nx + i]
+    }
+
+    /// (e, ∇e) at (x, y) by Catmull-Rom interpolation (C¹).
+    pub fn eval(&self, x: f64, y: f64) -> (f64, DVec2) {
+        let fx = ((x - self.origin.x) / self.spacing).clamp(0.0, (self.nx - 1) as f64);
+        let fy = ((y - self.origin.y) / self.spacing).clamp(0.0, (self.ny - 1) as f64);
+        let (i, j) = (
+            fx.floor().min((self.nx - 2) as f64),
+            fy.floor().min((self.ny - 2) as f64),
+        );
+        let (wx, dx) = catmull_rom(fx - i);
+        let (wy, dy) = catmull_rom(fy - j);
+        let (i, j) = (i as isize, j as isize);
+        let (mut e, mut ex, mut ey) = (0.0, 0.0, 0.0);
+        for b in 0..4 {
+            let (mut row, mut row_d) = (0.0, 0.0);
+            for a in 0..4 {
+                let v = self.at(i - 1 + a as isize, j - 1 + b as isize);
+                row += wx[a] * v;
+                row_d += dx[a] * v;
+            }
+            e += wy[b] * row;
+            ex += wy[b] * row_d;
+            ey += dy[b] * row;
+        }
+        (e, DVec2::new(ex, ey) / self.spacing)
+    }
+
+    fn max_slope_x(&self, half_w: f64, half_h: f64) -> (f64, DVec2) {
+        use rayon::prelude::*;
+        // Catmull-Rom derivatives are piecewise quadratic in x: sampling at
+        // nodes and half-cells finds the maximum to within a few per cent of
+        // a blurred profile; the steepness rule keeps a 10 % margin.
+        let step = self.spacing / 2.0;
+        let (n_x, n_y) = (
+            (2.0 * half_w / step).ceil() as usize,
+            (2.0 * half_h / step).ceil() as usize,
+        );
+        (0..=n_y)
+            .into_par_iter()
+            .map(|b| {
+                let y = -half_h + (b as f64 * step).min(2.0 * half_h);
+                let mut best = (0.0, DVec2::ZERO);
+                for a in 0..=n_x {
+                    let x = -half_w + (a as f64 * step).min(2.0 * half_w);
+                    let g = self.eval(x, y).1.x.abs();
+                    if g > best.0 {
+                        best = (g, DVec2::new(x, y));
+                    }
+                }
+                best
+            })
+            .reduce(|| (0.0, DVec2::ZERO), |a, b| if b.0 > a.0 { b } else { a })
+    }
+}
+
+/// Exact Euclidean distance (in cells) from every cell to the nearest cell
+/// where `target` is true (Felzenszwalb & Huttenlocher 2012).
+fn distance_transform(nx: usize, ny: usize, target: &[bool]) -> Vec<f64> {
+    const INF: f64 = 1e20;
+    let mut d: Vec<f64> = target.iter().map(|&t| if t { 0.0 } else { INF }).collect();
+    let mut buf_f = vec![0.0; nx.max(ny)];
+    let mut buf_d = vec![0.0; nx.max(ny)];
+    for i in 0..nx {
+        for j in 0..ny {
+            buf_f[j] = d[j * nx + i];
+        }
+        dt_1d(&buf_f[..ny], &mut buf_d[..ny]);
+        for j in 0..ny {
+            d[j * nx + i] = buf_d[j];
+        }
+    }
+    for j in 0..ny {
+        buf_f[..nx].copy_from_slice(&d[j * nx..(j + 1) * nx]);
+        dt_1d(&buf_f[..nx], &mut buf_d[..nx]);
+        d[j * nx..(j + 1) * nx].copy_from_slice(&buf_d[..nx]);
+    }
+    d.iter().map(|v| v.sqrt()).collect()
+}
+
+/// 1-D squared distance transform of sampled function `f` (lower envelope of parabolas).
+fn dt_1d(f: &[f64], out: &mut [f64]) {
+    let n = f.len();
+    let mut v = vec![0usize; n];
+    let mut z = vec![0.0f64; n + 1];
+    let mut k = 0usize;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    let meet = |q: usize, p: usize| {
+        ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64))
+    };
+    for q in 1..n {
+        let mut s = meet(q, v[k]);
+        while s <= z[k] {
+            k -= 1;
+            s = meet(q, v[k]);
+        }
+        k += 1;
+        v[k] = q;
+        z[k] = s;
+        z[k + 1] = f64::INFINITY;
+    }
+    k = 0;
+    for (q, o) in out.iter_mut().enumerate() {
+        while z[k + 1] < q as f64 {
+            k += 1;
+        }
+        let dq = q as f64 - v[k] as f64;
+        *o = dq * dq + f[v[k]];
+    }
+}
+
+fn gaussian_blur(values: &mut [f64], nx: usize, ny: usize, sigma_cells: f64) {
+    let radius = (3.0 * sigma_cells).ceil() as isize;
+    let kernel: Vec<f64> = (-radius..=radius)
+        .map(|k| (-(k * k) as f64 / (2.0 * sigma_cells * sigma_cells)).exp())
+        .collect();
+    let sum: f64 = kernel.iter().sum();
+    let kernel: Vec<f64> = kernel.iter().map(|k| k / sum).collect();
+    let mut tmp = vec![0.0; values.len()];
+    for j in 0..ny {
+        for i in 0..nx {
+            let mut acc = 0.0;
+            for (t, w) in kernel.iter().enumerate() {
+                let ii = (i as isize + t as isize - radius).clamp(0, nx as isize - 1) as usize;
+                acc += w * values[j * nx + ii];
+            }
+            tmp[j * nx + i] = acc;
+        }
+    }
+    for j in 0..ny {
+        for i in 0..nx {
+            let mut acc = 0.0;
+            for (t, w) in kernel.iter().enumerate() {
+                let jj = (j as isize + t as isize - radius).clamp(0, ny as isize - 1) as usize;
+                acc += w * tmp[jj * nx + i];
+            }
+            values[j * nx + i] = acc;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn disc_raster(n: usize, radius_px: f64) -> Raster {
+        let mut lum = vec![1.0f32; n * n];
+        for j in 0..n {
+            for i in 0..n {
+                let (x, y) = (
+                    i as f64 + 0.5 - n as f64 / 2.0,
+                    j as f64 + 0.5 - n as f64 / 2.0,
+                );
+                if x.hypot(y) < radius_px {
+                    lum[j * n + i] = 0.0;
+                }
+            }
+        }
+        Raster {
+            width: n,
+            height: n,
+            luminance: lum,
+        }
+    }
+
+    #[test]
+    fn gradients_match_finite_differences() {
+        let sampled = SampledProfile::from_raster(
+            &disc_raster(64, 20.0),
+            ProfileMode::Gray,
+            false,
+            2.0,
+            40.0,
+            30.0,
+        )
+        .unwrap();
+        let profiles = [
+            Profile::Rings { wavelength: 9.0 },
+            Profile::ramp(0.4, 40.0, 30.0),
+            Profile::Bump { sigma: 6.0 },
+            Profile::Sampled(sampled),
+        ];
+        let h = 1e-6;
+        for p in &profiles {
+            for &(x, y) in &[(0.0, 0.0), (3.3, -2.2), (-11.0, 7.7)] {
+                let (_, g) = p.value_grad(x, y);
+                let gx = (p.value(x + h, y) - p.value(x - h, y)) / (2.0 * h);
+                let gy = (p.value(x, y + h) - p.value(x, y - h)) / (2.0 * h);
+                assert!(
+                    (g.x - gx).abs() < 1e-6 && (g.y - gy).abs() < 1e-6,
+                    "{p:?} at {x},{y}: {g} vs {gx},{gy}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn shape_mode_levels_follow_the_outline() {
+        // A disc of radius 20 px in a 64 px image fitted to 64 mm: outline at ρ = 20 mm.
+        let p = SampledProfile::from_raster(
+            &disc_raster(64, 20.0),
+            ProfileMode::Shape { threshold: 0.5 },
+            false,
+            0.0,
+            64.0,
+            64.0,
+        )
+        .unwrap();
+        for &a in &[0.0f64, 0.7, 2.0, 4.0] {
+            let on_outline = p.eval(20.0 * a.cos(), 20.0 * a.sin()).0;
+            assert!((on_outline - 0.5).abs() < 0.04, "e on outline {on_outline}");
+            let centre = p.eval(0.0, 0.0).0;
+            assert!(centre > 0.95, "deepest point {centre}");
+            let out = p.eval(30.0 * a.cos(), 30.0 * a.sin()).0;
+            assert!((out - 0.25).abs() < 0.04, "10 mm outside: {out}");
+        }
+    }
+
+    #[test]
+    fn distance_transform_is_exact_on_a_point() {
+        let (nx, ny) = (7, 5);
+        let mut t = vec![false; nx * ny];
+        t[2 * nx + 3] = true;
+        let d = distance_transform(nx, ny, &t);
+        for j in 0..ny {
+            for i in 0..nx {
+                let e = ((i as f64 - 3.0).powi(2) + (j as f64 - 2.0).powi(2)).sqrt();
+                assert!((d[j * nx + i] - e).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn gray_image_fits_keeping_aspect() {
+        // 2:1 image into a square layout: the image spans the width, half the height.
+        let mut lum = vec![0.0f32; 20 * 10];
+        for j in 0..10 {
+            for i in 10..20 {
+                lum[j * 20 + i] = 1.0;
+            }
+        }
+        let p = SampledProfile::from_raster(
+            &Raster {
+                width: 20,
+                height: 10,
+                luminance: lum,
+            },
+            ProfileMode::Gray,
+            false,
+            0.0,
+            40.0,
+            40.0,
+        )
+        .unwrap();
+        assert!(p.eval(-10.0, 0.0).0 < 0.01 && p.eval(10.0, 0.0).0 > 0.99);
+        assert!(
+            p.eval(10.0, 15.0).0 > 0.99,
+            "border repeats beyond the image"
+        );
+    }
+}

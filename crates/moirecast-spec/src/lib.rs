@@ -1,0 +1,652 @@
+//! The design spec: a TOML file, parsed and validated at the edge.
+//!
+//! Every key has a written default (see [`DEFAULTS`] and the README). An
+//! unknown key, a value out of range or a missing image is a [`SpecError`]
+//! that names the key, the value, what is allowed and the fix. Nothing past
+//! this crate sees TOML.
+
+use moirecast_kernel::{
+    profile::SampledProfile, BaseParams, Design, DesignError, DesignParams, LensParams, LensRule,
+    Param, PitchSurface, Profile, ProfileMode, Raster,
+};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// The reference design (`molds/saddle-horse.toml`), built when no spec is given.
+pub const DEFAULT_SPEC: &str = include_str!("../../../molds/saddle-horse.toml");
+const EMBEDDED_IMAGES: &[(&str, &[u8])] = &[
+    (
+        "profiles/horse.png",
+        include_bytes!("../../../molds/profiles/horse.png"),
+    ),
+    (
+        "profiles/camera.png",
+        include_bytes!("../../../molds/profiles/camera.png"),
+    ),
+    (
+        "profiles/coins.png",
+        include_bytes!("../../../molds/profiles/coins.png"),
+    ),
+];
+
+/// Written defaults of every optional key, shown by `moirecast --help` and the README.
+pub const DEFAULTS: &str = "\
+surface.kind = \"saddle\", surface.radius = 60 mm; layout 60 × 60 mm, period 0.5 mm;
+lens.afov = 60°, lens.index = 1.41 (Sylgard 184), lens.rule = \"constant-afov\";
+base.kind = \"dual-lens\", base.a = 0, base.d = \"focal\", base.levels = 1, base.afov = lens.afov;
+profile.kind = \"rings\" (wavelength = min(width, height)/4) unless profile.image is given;
+profile.mode = \"shape\", blur = 1 mm, threshold = 0.5, invert = false; mesh.tolerance = 0.002 mm";
+
+#[derive(Debug, Error)]
+pub enum SpecError {
+    /// The spec file could not be read.
+    #[error("cannot read spec `{path}`: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// TOML syntax, an unknown key or a value of the wrong type. toml's
+    /// message names the key and shows the line.
+    #[error("spec `{file}`: {message}")]
+    Syntax { file: String, message: String },
+    /// A value that parses but is not allowed.
+    #[error("spec `{file}`: `{key}` = {value}: {problem}.\n  Fix: {fix}")]
+    Invalid {
+        file: String,
+        key: &'static str,
+        value: String,
+        problem: String,
+        fix: String,
+    },
+}
+
+/// The key of each kernel parameter in the spec.
+pub fn key_of(p: Param) -> &'static str {
+    match p {
+        Param::SurfaceRadius => "surface.radius",
+        Param::SurfaceFormula => "surface.z",
+        Param::Width => "layout.width",
+        Param::Height => "layout.height",
+        Param::Period => "layout.period",
+        Param::Afov => "lens.afov",
+        Param::Index => "lens.index",
+        Param::BaseAfov => "base.afov",
+        Param::BaseA => "base.a",
+        Param::BaseD => "base.d",
+        Param::Levels => "base.levels",
+        Param::Blur => "profile.blur",
+        Param::Tolerance => "mesh.tolerance",
+        Param::ProfileImage => "profile.image",
+        Param::ProfileWavelength => "profile.wavelength",
+        Param::ProfileSigma => "profile.sigma",
+    }
+}
+
+// ---- the file format ------------------------------------------------------
+
+#[derive(Deserialize, Debug, Default)]
+#[serde(deny_unknown_fields)]
+struct SpecFile {
+    #[serde(default)]
+    surface: SurfaceTable,
+    #[serde(default)]
+    layout: LayoutTable,
+    #[serde(default)]
+    lens: LensTable,
+    #[serde(default)]
+    base: BaseTable,
+    #[serde(default)]
+    profile: ProfileTable,
+    #[serde(default)]
+    mesh: MeshTable,
+}
+
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(rename_all = "kebab-case")]
+enum SurfaceKind {
+    Plane,
+    Saddle,
+    Paraboloid,
+    Cylinder,
+    Sphere,
+    Formula,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields, default)]
+struct SurfaceTable {
+    kind: SurfaceKind,
+    radius: f64,
+    z: Option<String>,
+}
+impl Default for SurfaceTable {
+    fn default() -> Self {
+        SurfaceTable {
+            kind: SurfaceKind::Saddle,
+            radius: 60.0,
+            z: None,
+        }
+    }
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields, default)]
+struct LayoutTable {
+    width: f64,
+    height: f64,
+    period: f64,
+}
+impl Default for LayoutTable {
+    fn default() -> Self {
+        LayoutTable {
+            width: 60.0,
+            height: 60.0,
+            period: 0.5,
+        }
+    }
+}
+
+#[derive(Deserialize, Debug, Clone, Copy)]
+#[serde(rename_all = "kebab-case")]
+enum RuleKey {
+    ConstantAfov,
+    EqualRadius,
+}
+
+/// Named materials and their refractive index.
+pub const MATERIALS: &[(&str, f64, &str)] = &[
+    ("sylgard-184", 1.41, "Dow datasheet 1.4118 at 632.8 nm"),
+    (
+        "polyjet-clear",
+        1.5,
+        "the paper's assumption for PolyJet clear",
+    ),
+    ("pmma", 1.49, "acrylic"),
+    ("polycarbonate", 1.585, ""),
+    ("epoxy", 1.55, "typical clear casting epoxy"),
+];
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields, default)]
+struct LensTable {
+    afov: f64,
+    index: Option<f64>,
+    material: Option<String>,
+    rule: RuleKey,
+}
+impl Default for LensTable {
+    fn default() -> Self {
+        LensTable {
+            afov: 60.0,
+            index: None,
+            material: None,
+            rule: RuleKey::ConstantAfov,
+        }
+    }
+}
+
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(rename_all = "kebab-case")]
+enum BaseKind {
+    DualLens,
+    Printed,
+}
+
+#[derive(Deserialize, Debug, Clone)]
+#[serde(untagged)]
+enum Distance {
+    Mm(f64),
+    Named(String),
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields, default)]
+struct BaseTable {
+    kind: BaseKind,
+    a: f64,
+    d: Distance,
+    levels: f64,
+    afov: Option<f64>,
+}
+impl Default for BaseTable {
+    fn default() -> Self {
+        BaseTable {
+            kind: BaseKind::DualLens,
+            a: 0.0,
+            d: Distance::Named("focal".into()),
+            levels: 1.0,
+            afov: None,
+        }
+    }
+}
+
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(rename_all = "kebab-case")]
+enum ProfileKind {
+    Image,
+    Rings,
+    Ramp,
+    Bump,
+    Flat,
+}
+
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq)]
+#[serde(rename_all = "kebab-case")]
+enum ModeKey {
+    Gray,
+    Shape,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields, default)]
+struct ProfileTable {
+    kind: Option<ProfileKind>,
+    image: Option<String>,
+    mode: ModeKey,
+    blur: f64,
+    threshold: f64,
+    invert: bool,
+    wavelength: Option<f64>,
+    angle: f64,
+    sigma: Option<f64>,
+}
+impl Default for ProfileTable {
+    fn default() -> Self {
+        ProfileTable {
+            kind: None,
+            image: None,
+            mode: ModeKey::Shape,
+            blur: 1.0,
+            threshold: 0.5,
+            invert: false,
+            wavelength: None,
+            angle: 90.0,
+            sigma: None,
+        }
+    }
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields, default)]
+struct MeshTable {
+    tolerance: f64,
+}
+impl Default for MeshTable {
+    fn default() -> Self {
+        MeshTable { tolerance: 0.002 }
+    }
+}
+
+// ---- loading --------------------------------------------------------------
+
+/// Where images named in a spec come from.
+pub enum ImageSource<'a> {
+    /// Relative to this directory (the spec file's).
+    Dir(&'a Path),
+    /// The images shipped inside the binary (for the default design).
+    Embedded,
+}
+
+/// A loaded, validated spec.
+#[derive(Debug)]
+pub struct Spec {
+    pub design: Design,
+    /// Where the spec came from (a path, or "<default>").
+    pub origin: String,
+    /// The profile's source, for reports: "rings", "profiles/horse.png (shape)".
+    pub profile_source: String,
+    pub material: Option<String>,
+}
+
+/// Loads the spec at `path`; images resolve relative to its directory.
+pub fn load(path: &Path) -> Result<Spec, SpecError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SpecError::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    parse(&text, &path.display().to_string(), ImageSource::Dir(dir))
+}
+
+/// The embedded default design.
+pub fn default_spec() -> Result<Spec, SpecError> {
+    parse(
+        DEFAULT_SPEC,
+        "<default: molds/saddle-horse.toml>",
+        ImageSource::Embedded,
+    )
+}
+
+fn invalid(
+    file: &str,
+    key: &'static str,
+    value: impl ToString,
+    problem: impl Into<String>,
+    fix: impl Into<String>,
+) -> SpecError {
+    SpecError::Invalid {
+        file: file.to_owned(),
+        key,
+        value: value.to_string(),
+        problem: problem.into(),
+        fix: fix.into(),
+    }
+}
+
+fn from_design_error(file: &str, e: DesignError) -> SpecError {
+    SpecError::Invalid {
+        file: file.to_owned(),
+        key: key_of(e.param),
+        value: e.value,
+        problem: e.problem,
+        fix: e.fix,
+    }
+}
+
+fn finite(file: &str, key: &'static str, v: f64) -> Result<f64, SpecError> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(invalid(
+            file,
+            key,
+            v,
+            "must be a finite number",
+            "write a number",
+        ))
+    }
+}
+
+/// Parses and validates spec text. `file` names it in errors.
+pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecError> {
+    let raw: SpecFile = toml::from_str(text).map_err(|e| SpecError::Syntax {
+        file: file.to_owned(),
+        message: e.to_string().trim_end().to_owned(),
+    })?;
+
+    // surface
+    let s = &raw.surface;
+    let radius = finite(file, "surface.radius", s.radius)?;
+    if s.z.is_some() && s.kind != SurfaceKind::Formula {
+        return Err(invalid(
+            file,
+            "surface.z",
+            format!("{:?}", s.z.as_deref().unwrap_or("")),
+            "is only used with kind = \"formula\"",
+            "set surface.kind = \"formula\" or remove surface.z",
+        ));
+    }
+    let surface = match s.kind {
+        SurfaceKind::Plane => PitchSurface::Plane,
+        SurfaceKind::Saddle => PitchSurface::Saddle { radius },
+        SurfaceKind::Paraboloid => PitchSurface::Paraboloid { radius },
+        SurfaceKind::Cylinder => PitchSurface::Cylinder { radius },
+        SurfaceKind::Sphere => PitchSurface::Sphere { radius },
+        SurfaceKind::Formula => {
+            let z = s.z.as_deref().ok_or_else(|| {
+                invalid(
+                    file,
+                    "surface.z",
+                    "(missing)",
+                    "kind = \"formula\" needs z = h(x, y), in mm",
+                    "add e.g. z = \"(x*x - y*y)/120\"",
+                )
+            })?;
+            PitchSurface::Formula(moirecast_kernel::surface::FormulaSurface::parse(z).map_err(
+                |e| {
+                    invalid(
+                        file,
+                        "surface.z",
+                        format!("{z:?}"),
+                        format!("is not a formula in x and y: {e}"),
+                        "use x, y, numbers, + - * / ^ and sin, cos, exp, sqrt…",
+                    )
+                },
+            )?)
+        }
+    };
+
+    // lens material
+    let index = match (&raw.lens.index, &raw.lens.material) {
+        (Some(i), _) => finite(file, "lens.index", *i)?,
+        (None, Some(m)) => MATERIALS
+            .iter()
+            .find(|(n, ..)| n == m)
+            .map(|(_, i, _)| *i)
+            .ok_or_else(|| {
+                let names: Vec<&str> = MATERIALS.iter().map(|(n, ..)| *n).collect();
+                invalid(
+                    file,
+                    "lens.material",
+                    format!("{m:?}"),
+                    format!("is not a known material ({})", names.join(", ")),
+                    "use one of those, or give lens.index",
+                )
+            })?,
+        (None, None) => 1.41,
+    };
+
+    if raw.base.kind == BaseKind::Printed {
+        return Err(invalid(
+            file,
+            "base.kind",
+            "\"printed\"",
+            "the printed (multi-material) base is not built yet",
+            "use kind = \"dual-lens\"",
+        ));
+    }
+    let d = match &raw.base.d {
+        Distance::Mm(d) => Some(finite(file, "base.d", *d)?),
+        Distance::Named(n) if n == "focal" => None,
+        Distance::Named(n) => {
+            return Err(invalid(
+                file,
+                "base.d",
+                format!("{n:?}"),
+                "must be a distance in mm or \"focal\"",
+                "write d = \"focal\" or a number",
+            ))
+        }
+    };
+    let afov = finite(file, "lens.afov", raw.lens.afov)?.to_radians();
+    let base_afov = raw
+        .base
+        .afov
+        .map(|a| finite(file, "base.afov", a).map(f64::to_radians))
+        .transpose()?;
+
+    // profile
+    let layout = &raw.layout;
+    let (w, h) = (
+        finite(file, "layout.width", layout.width)?,
+        finite(file, "layout.height", layout.height)?,
+    );
+    let p = &raw.profile;
+    let blur = finite(file, "profile.blur", p.blur)?;
+    if !(0.0..=20.0).contains(&blur) {
+        return Err(invalid(
+            file,
+            "profile.blur",
+            blur,
+            "must be between 0 and 20 mm",
+            "1 mm suits a 0.5 mm period",
+        ));
+    }
+    let kind = match (p.kind, &p.image) {
+        (None, Some(_)) | (Some(ProfileKind::Image), Some(_)) => ProfileKind::Image,
+        (Some(ProfileKind::Image), None) => {
+            return Err(invalid(
+                file,
+                "profile.image",
+                "(missing)",
+                "kind = \"image\" needs an image",
+                "add image = \"profiles/horse.png\"",
+            ))
+        }
+        (Some(k), Some(img)) => {
+            return Err(invalid(
+                file,
+                "profile.image",
+                format!("{img:?}"),
+                format!("is given together with kind = {k:?}"),
+                "remove one of profile.kind and profile.image",
+            ))
+        }
+        (Some(k), None) => k,
+        (None, None) => ProfileKind::Rings,
+    };
+    let positive = |key: &'static str, v: f64| -> Result<f64, SpecError> {
+        finite(file, key, v)?;
+        if v <= 0.0 {
+            return Err(invalid(
+                file,
+                key,
+                v,
+                "must be positive",
+                "give a length in mm",
+            ));
+        }
+        Ok(v)
+    };
+    let (profile, profile_source) = match kind {
+        ProfileKind::Flat => (Profile::Flat, "flat".to_string()),
+        ProfileKind::Rings => {
+            let wl = positive("profile.wavelength", p.wavelength.unwrap_or(w.min(h) / 4.0))?;
+            (
+                Profile::Rings { wavelength: wl },
+                format!("rings (wavelength {wl} mm)"),
+            )
+        }
+        ProfileKind::Ramp => (
+            Profile::ramp(finite(file, "profile.angle", p.angle)?.to_radians(), w, h),
+            format!("ramp ({}°)", p.angle),
+        ),
+        ProfileKind::Bump => {
+            let s = positive("profile.sigma", p.sigma.unwrap_or(w.min(h) / 6.0))?;
+            (Profile::Bump { sigma: s }, format!("bump (sigma {s} mm)"))
+        }
+        ProfileKind::Image => {
+            let name = p.image.clone().unwrap_or_default();
+            let threshold = finite(file, "profile.threshold", p.threshold)?;
+            if !(0.0..=1.0).contains(&threshold) || threshold == 0.0 {
+                return Err(invalid(
+                    file,
+                    "profile.threshold",
+                    threshold,
+                    "must be in (0, 1]",
+                    "0.5 splits dark from light",
+                ));
+            }
+            let raster = read_raster(file, &name, &images)?;
+            let mode = match p.mode {
+                ModeKey::Gray => ProfileMode::Gray,
+                ModeKey::Shape => ProfileMode::Shape { threshold },
+            };
+            if w <= 0.0 || h <= 0.0 {
+                return Err(invalid(
+                    file,
+                    "layout.width",
+                    w,
+                    "the layout must have a positive size",
+                    "give width and height in mm",
+                ));
+            }
+            let sampled = SampledProfile::from_raster(&raster, mode, p.invert, blur, w, h)
+                .map_err(|e| {
+                    invalid(
+                        file,
+                        "profile.image",
+                        format!("{name:?}"),
+                        e,
+                        "check profile.threshold and profile.invert",
+                    )
+                })?;
+            (
+                Profile::Sampled(sampled),
+                format!("{name} ({:?}, blur {blur} mm)", p.mode).to_lowercase(),
+            )
+        }
+    };
+
+    let params = DesignParams {
+        surface,
+        width: w,
+        height: h,
+        period: finite(file, "layout.period", layout.period)?,
+        lens: LensParams {
+            afov,
+            index,
+            rule: match raw.lens.rule {
+                RuleKey::ConstantAfov => LensRule::ConstantAfov,
+                RuleKey::EqualRadius => LensRule::EqualRadius,
+            },
+        },
+        base: BaseParams {
+            a: finite(file, "base.a", raw.base.a)?,
+            d,
+            levels: finite(file, "base.levels", raw.base.levels)?,
+            afov: base_afov,
+        },
+        profile,
+        tolerance: finite(file, "mesh.tolerance", raw.mesh.tolerance)?,
+    };
+    let design = Design::new(params).map_err(|e| from_design_error(file, e))?;
+    Ok(Spec {
+        design,
+        origin: file.to_owned(),
+        profile_source,
+        material: raw.lens.material.clone(),
+    })
+}
+
+/// Reads an image as luminance composited over white.
+fn read_raster(file: &str, name: &str, images: &ImageSource) -> Result<Raster, SpecError> {
+    let bytes = match images {
+        ImageSource::Dir(dir) => {
+            let path = dir.join(name);
+            std::fs::read(&path).map_err(|e| {
+                invalid(
+                    file,
+                    "profile.image",
+                    format!("{name:?}"),
+                    format!("cannot read {}: {e}", path.display()),
+                    "give a PNG path relative to the spec file",
+                )
+            })?
+        }
+        ImageSource::Embedded => EMBEDDED_IMAGES
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, b)| b.to_vec())
+            .ok_or_else(|| {
+                invalid(
+                    file,
+                    "profile.image",
+                    format!("{name:?}"),
+                    "is not an embedded image",
+                    "give a spec file",
+                )
+            })?,
+    };
+    let img = image::load_from_memory(&bytes).map_err(|e| {
+        invalid(
+            file,
+            "profile.image",
+            format!("{name:?}"),
+            format!("is not a readable image: {e}"),
+            "use a PNG file",
+        )
+    })?;
+    let la = img.to_luma_alpha32f();
+    let (width, height) = (la.width() as usize, la.height() as usize);
+    let luminance = la
+        .pixels()
+        .map(|p| p.0[1] * p.0[0] + (1.0 - p.0[1]))
+        .collect();
+    Ok(Raster {
+        width,
+        height,
+        luminance,
+    })
+}

@@ -1,0 +1,104 @@
+//! The `moirecast` pipelines behind the command line: spec → exact model →
+//! mesh → checks → files. The binary (`main.rs`) only parses arguments and
+//! draws progress.
+
+pub mod report;
+
+use anyhow::{bail, Context, Result};
+use moirecast_export::{stl_bytes, OutputSet};
+use moirecast_kernel::check::{solid_checks, CheckResult};
+use moirecast_kernel::mesher::{mesh_device, DeviceMesh};
+use moirecast_kernel::progress::Progress;
+use moirecast_kernel::{measure, Design};
+use moirecast_spec::Spec;
+use std::path::{Path, PathBuf};
+
+/// Vertices re-projected onto their exact surfaces for the report
+/// (tests check every vertex; this keeps the command fast).
+const REPORT_VERTEX_SAMPLES: usize = 5000;
+/// Lens triangles sampled for the surface-to-mesh bound in the report.
+const REPORT_TRIANGLE_SAMPLES: usize = 20000;
+
+/// Everything measured about one device build.
+pub struct DeviceBuild {
+    pub mesh: DeviceMesh,
+    pub lens_stats: measure::LensStats,
+    pub checks: Vec<CheckResult>,
+}
+
+/// The measured-AFOV check: every measured revealer arc spans α
+/// (constant-AFOV lenses only; equal-radius lenses vary by design).
+fn afov_check(design: &Design, stats: &measure::LensStats) -> Option<CheckResult> {
+    if design.params.lens.rule != moirecast_kernel::LensRule::ConstantAfov {
+        return None;
+    }
+    let alpha = design.params.lens.afov.to_degrees();
+    let dev = (stats.afov_deg.min - alpha)
+        .abs()
+        .max((stats.afov_deg.max - alpha).abs());
+    Some(CheckResult::at_most(
+        "measured-afov",
+        dev,
+        1e-6,
+        "degrees",
+        format!("largest |measured − α| over {} arcs", stats.arcs),
+    ))
+}
+
+/// Builds and checks the device mesh (METHOD §7.1–§7.3). Checks that fail
+/// are returned, not raised: the caller decides.
+pub fn build_device(design: &Design, progress: &dyn Progress) -> Result<DeviceBuild> {
+    let mesh = mesh_device(design, progress).context("meshing the device")?;
+    progress.stage("checking", 1);
+    let mut checks = solid_checks(&mesh.mesh);
+    let v_stride = (mesh.mesh.positions.len() / REPORT_VERTEX_SAMPLES).max(1);
+    let t_stride = (mesh.mesh.triangles.len() / REPORT_TRIANGLE_SAMPLES).max(1);
+    checks.push(measure::vertex_on_surface(design, &mesh, v_stride));
+    checks.push(measure::surface_to_mesh(design, &mesh, t_stride));
+    checks.push(measure::walls_on_outline(design, &mesh));
+    checks.push(measure::creases_shared(design, &mesh));
+    checks.push(measure::base_creases_follow_shift(design, &mesh));
+    let lens_stats = measure::revealer_lens_stats(design, &mesh);
+    checks.extend(afov_check(design, &lens_stats));
+    checks.push(CheckResult::at_most(
+        "arcs-are-circles",
+        lens_stats.circle_residual,
+        1e-9,
+        "mm",
+        "largest distance of a station-row vertex from its lens circle".into(),
+    ));
+    progress.tick(1);
+    Ok(DeviceBuild {
+        mesh,
+        lens_stats,
+        checks,
+    })
+}
+
+/// `moirecast device`: builds the device of `spec` and writes
+/// `device.stl` and `report.json` into `out` — all of them, or nothing.
+pub fn run_device(spec: &Spec, out: &Path, progress: &dyn Progress) -> Result<Vec<PathBuf>> {
+    let build = build_device(&spec.design, progress)?;
+    if let Some(c) = build.checks.iter().find(|c| !c.passed) {
+        bail!(
+            "check `{}` failed: measured {} {} against limit {} ({}); nothing was written",
+            c.name,
+            c.value,
+            c.unit,
+            c.limit,
+            c.detail
+        );
+    }
+    progress.stage("writing", 1);
+    let stl = stl_bytes("device.stl", &build.mesh.mesh)?;
+    let report = report::device_report(spec, &build, stl.len());
+    let mut files = OutputSet::new();
+    files.add("device.stl", stl);
+    files.add(
+        "report.json",
+        (serde_json::to_string_pretty(&report)? + "\n").into_bytes(),
+    );
+    let written = files.commit(out)?;
+    progress.tick(1);
+    Ok(written)
+}

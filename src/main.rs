@@ -1,0 +1,141 @@
+//! The `moirecast` command line.
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use moirecast_kernel::progress::Progress;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+#[derive(Parser)]
+#[command(name = "moirecast", version, about = "Curved-surface level-line moiré devices and their casting molds.", after_help = moirecast_spec::DEFAULTS)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Build the device: DIR/device.stl and DIR/report.json.
+    Device {
+        /// The design spec (TOML). Without it, the embedded reference design (saddle + horse).
+        spec: Option<PathBuf>,
+        /// Output directory.
+        #[arg(short, long, default_value = "moirecast-out")]
+        out: PathBuf,
+        /// No progress bars.
+        #[arg(short, long)]
+        quiet: bool,
+        /// Print how long each stage took.
+        #[arg(short, long)]
+        verbose: bool,
+    },
+}
+
+/// Draws the kernel's stages as indicatif bars on stderr (hidden when
+/// stderr is not a terminal).
+struct Bars {
+    quiet: bool,
+    verbose: bool,
+    bar: Mutex<Option<ProgressBar>>,
+    stage_started: Mutex<Option<(&'static str, std::time::Instant)>>,
+}
+
+impl Progress for Bars {
+    fn stage(&self, name: &'static str, total: u64) {
+        self.end_stage(Some(name));
+        let mut bar = self.bar.lock().unwrap();
+        if let Some(b) = bar.take() {
+            b.finish_and_clear();
+        }
+        if !self.quiet {
+            let b = ProgressBar::new(total);
+            b.set_style(
+                ProgressStyle::with_template(
+                    "{spinner} {msg:<22} [{bar:30}] {pos}/{len} {elapsed}",
+                )
+                .unwrap()
+                .progress_chars("=> "),
+            );
+            b.set_message(name);
+            *bar = Some(b);
+        }
+    }
+    fn tick(&self, n: u64) {
+        if let Some(b) = self.bar.lock().unwrap().as_ref() {
+            b.inc(n);
+        }
+    }
+}
+
+impl Bars {
+    fn end_stage(&self, next: Option<&'static str>) {
+        let mut started = self.stage_started.lock().unwrap();
+        if let (true, Some((name, t))) = (self.verbose, started.as_ref()) {
+            eprintln!("  {name:<22} {:8.1} ms", t.elapsed().as_secs_f64() * 1e3);
+        }
+        *started = next.map(|n| (n, std::time::Instant::now()));
+    }
+
+    fn done(&self) {
+        self.end_stage(None);
+        if let Some(b) = self.bar.lock().unwrap().take() {
+            b.finish_and_clear();
+        }
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    let command = cli.command.unwrap_or(Command::Device {
+        spec: None,
+        out: PathBuf::from("moirecast-out"),
+        quiet: false,
+        verbose: false,
+    });
+    match command {
+        Command::Device {
+            spec,
+            out,
+            quiet,
+            verbose,
+        } => {
+            let bars = Bars {
+                quiet,
+                verbose,
+                bar: Mutex::new(None),
+                stage_started: Mutex::new(None),
+            };
+            let started = std::time::Instant::now();
+            bars.stage("reading spec", 1);
+            let spec = match &spec {
+                Some(path) => moirecast_spec::load(path)?,
+                None => {
+                    eprintln!(
+                        "no spec given: building the reference design (molds/saddle-horse.toml)"
+                    );
+                    moirecast_spec::default_spec()?
+                }
+            };
+            let result = moirecast::run_device(&spec, &out, &bars);
+            bars.done();
+            let written = result?;
+            if !quiet {
+                for f in &written {
+                    eprintln!("wrote {}", f.display());
+                }
+                eprintln!("done in {:.2} s", started.elapsed().as_secs_f64());
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,239 @@
+//! `report.json`: what was built, the design's derived numbers, what was
+//! measured, and every check with its value. Deterministic: no timings, no
+//! paths beyond the spec's own name.
+
+use crate::DeviceBuild;
+use moirecast_kernel::check::CheckResult;
+use moirecast_kernel::measure::{self, Range};
+use moirecast_kernel::{Mesh, PitchSurface};
+use moirecast_spec::Spec;
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+#[derive(Serialize)]
+pub struct MinMax {
+    pub min: f64,
+    pub max: f64,
+}
+
+impl From<Range> for MinMax {
+    fn from(r: Range) -> Self {
+        MinMax {
+            min: r.min,
+            max: r.max,
+        }
+    }
+}
+
+#[derive(Serialize)]
+pub struct FileReport {
+    pub bytes: usize,
+    pub triangles: usize,
+    pub volume_mm3: f64,
+    pub bbox_min: [f64; 3],
+    pub bbox_max: [f64; 3],
+}
+
+impl FileReport {
+    pub fn of(mesh: &Mesh, bytes: usize) -> Self {
+        let (lo, hi) = mesh.bounds();
+        FileReport {
+            bytes,
+            triangles: mesh.triangles.len(),
+            volume_mm3: mesh.volume(),
+            bbox_min: lo.to_array(),
+            bbox_max: hi.to_array(),
+        }
+    }
+}
+
+#[derive(Serialize)]
+pub struct DesignEcho {
+    pub surface: &'static str,
+    pub surface_radius_mm: Option<f64>,
+    pub surface_formula: Option<String>,
+    pub width_mm: f64,
+    pub height_mm: f64,
+    pub period_mm: f64,
+    pub afov_deg: f64,
+    pub index: f64,
+    pub material: Option<String>,
+    pub lens_rule: &'static str,
+    pub base_kind: &'static str,
+    pub base_a: f64,
+    pub base_d_mm: f64,
+    pub base_levels: f64,
+    pub base_afov_deg: f64,
+    pub profile: String,
+    pub tolerance_mm: f64,
+}
+
+/// The derived numbers of METHOD §2: N and the standard lens.
+#[derive(Serialize)]
+#[allow(non_snake_case)]
+pub struct Derived {
+    pub N: usize,
+    pub w_s: f64,
+    pub r_s: f64,
+    pub s_s: f64,
+    pub F_s: f64,
+    pub D_s: f64,
+    pub max_surface_slope_deg: f64,
+    pub max_surface_curvature_per_mm: f64,
+}
+
+#[derive(Serialize)]
+pub struct MeshReport {
+    pub triangles: usize,
+    pub vertices: usize,
+    pub revealer_triangles: usize,
+    pub base_triangles: usize,
+    pub wall_triangles: usize,
+    pub revealer_rows: usize,
+    pub base_rows: usize,
+    pub base_crossing_rows: usize,
+    pub revealer_columns: [usize; 2],
+    pub base_columns: [usize; 2],
+    /// Triangles a uniform grid would need for the same tolerance.
+    pub uniform_triangles: usize,
+}
+
+/// Revealer lens geometry measured from the mesh.
+#[derive(Serialize)]
+pub struct LensReport {
+    pub arcs_measured: usize,
+    pub pitch_mm: MinMax,
+    pub radius_mm: MinMax,
+    pub afov_deg: MinMax,
+    pub sag_mm: MinMax,
+    pub focal_depth_mm: MinMax,
+}
+
+#[derive(Serialize)]
+pub struct CheckReport {
+    pub name: &'static str,
+    pub value: f64,
+    pub limit: f64,
+    pub unit: &'static str,
+    pub passed: bool,
+    pub detail: String,
+}
+
+impl From<&CheckResult> for CheckReport {
+    fn from(c: &CheckResult) -> Self {
+        CheckReport {
+            name: c.name,
+            value: c.value,
+            limit: c.limit,
+            unit: c.unit,
+            passed: c.passed,
+            detail: c.detail.clone(),
+        }
+    }
+}
+
+#[derive(Serialize)]
+pub struct DeviceReport {
+    pub moirecast: &'static str,
+    pub spec: String,
+    pub design: DesignEcho,
+    pub derived: Derived,
+    pub files: BTreeMap<String, FileReport>,
+    pub mesh: MeshReport,
+    pub lenses: LensReport,
+    pub base_shift_mm: MinMax,
+    pub base_shift_periods: MinMax,
+    pub checks: Vec<CheckReport>,
+}
+
+pub fn design_echo(spec: &Spec) -> DesignEcho {
+    let d = &spec.design;
+    let p = &d.params;
+    let (radius, formula) = match &p.surface {
+        PitchSurface::Plane => (None, None),
+        PitchSurface::Saddle { radius }
+        | PitchSurface::Paraboloid { radius }
+        | PitchSurface::Cylinder { radius }
+        | PitchSurface::Sphere { radius } => (Some(*radius), None),
+        PitchSurface::Formula(f) => (None, Some(f.source.clone())),
+    };
+    DesignEcho {
+        surface: p.surface.kind(),
+        surface_radius_mm: radius,
+        surface_formula: formula,
+        width_mm: p.width,
+        height_mm: p.height,
+        period_mm: p.period,
+        afov_deg: p.lens.afov.to_degrees(),
+        index: p.lens.index,
+        material: spec.material.clone(),
+        lens_rule: match p.lens.rule {
+            moirecast_kernel::LensRule::ConstantAfov => "constant-afov",
+            moirecast_kernel::LensRule::EqualRadius => "equal-radius",
+        },
+        base_kind: "dual-lens",
+        base_a: p.base.a,
+        base_d_mm: d.d,
+        base_levels: p.base.levels,
+        base_afov_deg: p.base.afov.unwrap_or(p.lens.afov).to_degrees(),
+        profile: spec.profile_source.clone(),
+        tolerance_mm: d.tolerance.mm(),
+    }
+}
+
+pub fn device_report(spec: &Spec, build: &DeviceBuild, stl_bytes: usize) -> DeviceReport {
+    let d = &spec.design;
+    let s = &d.standard;
+    let st = &build.mesh.stats;
+    let ls = &build.lens_stats;
+    let shift = measure::shift_range(d);
+    let t = d.params.period;
+    let mut files = BTreeMap::new();
+    files.insert(
+        "device.stl".to_string(),
+        FileReport::of(&build.mesh.mesh, stl_bytes),
+    );
+    DeviceReport {
+        moirecast: env!("CARGO_PKG_VERSION"),
+        spec: spec.origin.clone(),
+        design: design_echo(spec),
+        derived: Derived {
+            N: d.lenses,
+            w_s: s.width,
+            r_s: s.radius,
+            s_s: s.sag,
+            F_s: s.focal_length,
+            D_s: s.focal_depth,
+            max_surface_slope_deg: d.max_slope.to_degrees(),
+            max_surface_curvature_per_mm: d.max_curvature,
+        },
+        files,
+        mesh: MeshReport {
+            triangles: st.triangles,
+            vertices: st.vertices,
+            revealer_triangles: st.revealer_triangles,
+            base_triangles: st.base_triangles,
+            wall_triangles: st.wall_triangles,
+            revealer_rows: st.revealer_rows,
+            base_rows: st.base_rows,
+            base_crossing_rows: st.crossing_rows,
+            revealer_columns: [st.revealer_columns.0, st.revealer_columns.1],
+            base_columns: [st.base_columns.0, st.base_columns.1],
+            uniform_triangles: st.uniform_triangles,
+        },
+        lenses: LensReport {
+            arcs_measured: ls.arcs,
+            pitch_mm: ls.pitch.into(),
+            radius_mm: ls.radius.into(),
+            afov_deg: ls.afov_deg.into(),
+            sag_mm: ls.sag.into(),
+            focal_depth_mm: ls.focal_depth.into(),
+        },
+        base_shift_mm: shift.into(),
+        base_shift_periods: MinMax {
+            min: shift.min / t,
+            max: shift.max / t,
+        },
+        checks: build.checks.iter().map(CheckReport::from).collect(),
+    }
+}
