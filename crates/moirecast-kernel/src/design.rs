@@ -521,7 +521,7 @@ mod tests {
         assert!((s.radius - 0.5).abs() < 1e-15);
         assert!((s.sag - 0.066_987_298_107_780_7).abs() < 1e-15);
         assert!((s.focal_length - 1.719_512_195_121_951).abs() < 1e-12);
-        assert!((s.focal_depth - 1.652_524_896_9).abs() < 1e-10);
+        assert!((s.focal_depth - 1.652_524_897_014_17).abs() < 1e-12);
         // α = 90°, T = 1: r = 1/√2, s = r(1 − 1/√2), n = 1.5: F = 3r.
         let s = StandardLens::new(1.0, 90f64.to_radians(), 1.5);
         assert!((s.radius - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-15);

@@ -21,6 +21,7 @@
 
 use crate::design::Design;
 use crate::error::{KernelError, Result};
+use crate::lens::LensArc;
 use crate::mesh::Mesh;
 use crate::model::LensRef;
 use crate::progress::Progress;
@@ -31,7 +32,7 @@ use rayon::prelude::*;
 use std::collections::BTreeMap;
 
 /// Share of the tolerance given to the chordal error across a lens.
-const ACROSS_SHARE: f64 = 0.5;
+const ACROSS_SHARE: f64 = 0.45;
 /// Share of the tolerance given to the chordal error along a lens. The two
 /// add at most at a triangle's interior; the rest is margin for the twist.
 const ALONG_SHARE: f64 = 0.4;
@@ -124,6 +125,8 @@ pub struct DeviceMesh {
     pub revealer_rows: Vec<f64>,
     /// Columns per revealer lens.
     pub revealer_columns: Vec<usize>,
+    /// Columns per base lens (lenses entirely outside the outline included).
+    pub base_columns: BTreeMap<i64, usize>,
 }
 
 impl DeviceMesh {
@@ -200,21 +203,6 @@ fn rows_from_curvature(lo: f64, hi: f64, k: &[f64], e: f64, min_segments: usize)
     rows
 }
 
-/// Second-difference magnitude |p(s−h) − 2p(s) + p(s+h)| / h² of a sampled
-/// curve (one value per interior sample; ends copy their neighbour).
-fn second_differences(points: &[DVec3], h: f64) -> Vec<f64> {
-    let n = points.len();
-    let mut out = vec![0.0; n];
-    for s in 1..n - 1 {
-        out[s] = (points[s - 1] - 2.0 * points[s] + points[s + 1]).length() / (h * h);
-    }
-    if n > 2 {
-        out[0] = out[1];
-        out[n - 1] = out[n - 2];
-    }
-    out
-}
-
 /// Triangulates the strip between polylines `a` and `b` (both ordered by
 /// `key`), advancing along whichever has the nearer next vertex. Triangles
 /// are (a_i, a_{i+1}, b_j) and (a_i, b_{j+1}, b_j), reversed if `flip`.
@@ -260,6 +248,37 @@ struct BaseRow {
     ends: (u32, u32),
 }
 
+impl BaseRow {
+    /// The lens cut by `side`'s x-wall on this row and the arc parameter of
+    /// the cut, if a lens (not just a crease) meets that wall.
+    fn wall_cut(&self, side: Side) -> Option<(i64, f64)> {
+        let mut present = self.lenses.iter().filter(|(_, p)| p.len() > 1);
+        let (k, poly) = match side {
+            Side::Left => present.next()?,
+            _ => present.next_back()?,
+        };
+        let v = if side == Side::Left {
+            poly[0]
+        } else {
+            *poly.last()?
+        };
+        self.origins[v as usize]
+            .params_on(LensRef::Base(*k))
+            .map(|p| (*k, p.x))
+    }
+}
+
+/// What the survey of one lens found.
+struct LensSurvey {
+    columns: usize,
+    /// Effective curvature along the lens at each station (1/mm).
+    k_eff: Vec<f64>,
+    /// y of the lens's first crease at each station.
+    ys: Vec<f64>,
+    /// The first crease point at each station.
+    first: Vec<DVec3>,
+}
+
 struct Planner<'a> {
     design: &'a Design,
 }
@@ -276,41 +295,79 @@ impl<'a> Planner<'a> {
         ((0..=SURVEY_CELLS).map(|s| -hh + s as f64 * h).collect(), h)
     }
 
+    /// Surveys one lens from its station arcs: the columns that meet the
+    /// across share of the tolerance at every station, and per station the
+    /// effective curvature along the lens, K_eff = 8·e / Δv², where Δv is the
+    /// largest row spacing with K_vv·Δv² + 2·Δt·K_tv·Δv ≤ 8·e (the pure and
+    /// twist terms of a triangle's interpolation error; Δt = 1/columns).
+    fn survey_lens(&self, arcs: &[LensArc], h: f64) -> LensSurvey {
+        const TS: usize = 9;
+        let e_along = ALONG_SHARE * self.tol();
+        let mut columns = 2;
+        let pts: Vec<[DVec3; TS]> = arcs
+            .iter()
+            .map(|arc| {
+                columns = columns.max(columns_for(
+                    arc.radius,
+                    2.0 * arc.half_angle,
+                    ACROSS_SHARE * self.tol(),
+                ));
+                std::array::from_fn(|j| arc.point(j as f64 / (TS - 1) as f64))
+            })
+            .collect();
+        let dt = 1.0 / columns as f64;
+        let n = pts.len();
+        let mut k_eff = vec![0.0; n];
+        for s in 1..n - 1 {
+            let mut worst = 0.0f64;
+            for j in 0..TS {
+                let kvv = (pts[s - 1][j] - 2.0 * pts[s][j] + pts[s + 1][j]).length() / (h * h);
+                let (ja, jb) = (j.saturating_sub(1), (j + 1).min(TS - 1));
+                let ktv = ((pts[s + 1][jb] - pts[s - 1][jb]) - (pts[s + 1][ja] - pts[s - 1][ja]))
+                    .length()
+                    / (2.0 * h * (jb - ja) as f64 / (TS - 1) as f64);
+                // largest Δv with kvv Δv² + 2 dt ktv Δv = 8 e
+                let b = dt * ktv;
+                let dv = if kvv > 0.0 {
+                    (-b + (b * b + 8.0 * kvv * e_along).sqrt()) / kvv
+                } else if b > 0.0 {
+                    4.0 * e_along / b
+                } else {
+                    f64::INFINITY
+                };
+                worst = worst.max(8.0 * e_along / (dv * dv));
+            }
+            k_eff[s] = worst;
+        }
+        if n > 2 {
+            k_eff[0] = k_eff[1];
+            k_eff[n - 1] = k_eff[n - 2];
+        }
+        LensSurvey {
+            columns,
+            k_eff,
+            ys: pts.iter().map(|p| p[0].y).collect(),
+            first: pts.iter().map(|p| p[0]).collect(),
+        }
+    }
+
     /// Revealer: columns per lens, and rows (stations).
     fn revealer_plan(&self) -> (Vec<usize>, Vec<f64>, f64) {
         let d = self.design;
         let (stations, h) = self.survey_stations(0.0);
-        let per_lens: Vec<(usize, Vec<f64>)> = (0..d.lenses as i64)
+        let surveys: Vec<LensSurvey> = (0..d.lenses as i64)
             .into_par_iter()
             .map(|i| {
-                let mut kmax = vec![0.0f64; stations.len()];
-                let mut cols = 2;
-                for &t in &[0.0, 0.5] {
-                    let pts: Vec<DVec3> = stations
-                        .iter()
-                        .map(|&v| d.revealer_point(i, t, v))
-                        .collect();
-                    for (k, s) in kmax.iter_mut().zip(second_differences(&pts, h)) {
-                        *k = k.max(s);
-                    }
-                }
-                for &v in stations.iter().step_by(SURVEY_CELLS / 8) {
-                    let arc = d.revealer_arc(i, v);
-                    cols = cols.max(columns_for(
-                        arc.radius,
-                        2.0 * arc.half_angle,
-                        ACROSS_SHARE * self.tol(),
-                    ));
-                }
-                (cols, kmax)
+                let arcs: Vec<LensArc> = stations.iter().map(|&v| d.revealer_arc(i, v)).collect();
+                self.survey_lens(&arcs, h)
             })
             .collect();
-        let columns: Vec<usize> = per_lens.iter().map(|p| p.0).collect();
+        let columns: Vec<usize> = surveys.iter().map(|s| s.columns).collect();
         let k: Vec<f64> = (0..SURVEY_CELLS)
             .map(|c| {
-                per_lens
+                surveys
                     .iter()
-                    .map(|p| p.1[c].max(p.1[c + 1]))
+                    .map(|s| s.k_eff[c].max(s.k_eff[c + 1]))
                     .fold(0.0, f64::max)
             })
             .collect();
@@ -327,8 +384,8 @@ impl<'a> Planner<'a> {
         (columns, rows, kmax)
     }
 
-    /// Base: columns per lens, curvature per y-cell, and crease samples for
-    /// finding crossings with the x-walls.
+    /// Base: columns per lens, effective curvature per y-cell, and crease
+    /// samples for finding crossings with the x-walls.
     #[allow(clippy::type_complexity)]
     fn base_survey(
         &self,
@@ -347,57 +404,38 @@ impl<'a> Planner<'a> {
             (((y + hh) / (2.0 * hh) * SURVEY_CELLS as f64).floor() as isize)
                 .clamp(0, SURVEY_CELLS as isize - 1) as usize
         };
-        #[allow(clippy::type_complexity)]
-        let per_lens: Vec<Result<(i64, usize, Vec<f64>, Vec<(f64, DVec3)>)>> = (k0..k1)
+        let surveys: Vec<(i64, LensSurvey)> = (k0..k1)
             .into_par_iter()
             .map(|k| {
-                let mut kcell = vec![0.0f64; SURVEY_CELLS];
-                let mut cols = 2;
-                let mut crease = Vec::with_capacity(stations.len());
-                let mut inside = false;
-                for &t in &[0.0, 0.5] {
-                    let pts = stations
-                        .iter()
-                        .map(|&v| d.base_point(k, t, v))
-                        .collect::<Result<Vec<_>>>()?;
-                    if t == 0.0 {
-                        crease = stations.iter().cloned().zip(pts.iter().cloned()).collect();
-                    }
-                    let sd = second_differences(&pts, h);
-                    for (p, s) in pts.iter().zip(sd) {
-                        if p.x >= xl - d.params.period
-                            && p.x <= xr + d.params.period
-                            && p.y.abs() <= hh + h
-                        {
-                            inside = true;
-                            let c = cell_of(p.y);
-                            kcell[c] = kcell[c].max(s);
-                        }
-                    }
-                }
-                if inside {
-                    for &v in stations.iter().step_by(SURVEY_CELLS / 8) {
-                        let arc = d.base_arc(k, v)?;
-                        cols = cols.max(columns_for(
-                            arc.radius,
-                            2.0 * arc.half_angle,
-                            ACROSS_SHARE * self.tol(),
-                        ));
-                    }
-                }
-                Ok((k, cols, kcell, crease))
+                let arcs = stations
+                    .iter()
+                    .map(|&v| d.base_arc(k, v))
+                    .collect::<Result<Vec<_>>>()?;
+                Ok((k, self.survey_lens(&arcs, h)))
             })
-            .collect();
+            .collect::<Result<_>>()?;
         let mut columns = BTreeMap::new();
-        let mut k = vec![0.0f64; SURVEY_CELLS];
+        let mut kcell = vec![0.0f64; SURVEY_CELLS];
         let mut creases = Vec::new();
-        for r in per_lens {
-            let (lens, cols, kcell, crease) = r?;
-            columns.insert(lens, cols);
-            for (a, b) in k.iter_mut().zip(kcell) {
-                *a = a.max(b);
+        for (k, s) in &surveys {
+            columns.insert(*k, s.columns);
+            for (idx, (&y, p)) in s.ys.iter().zip(&s.first).enumerate() {
+                let inside = p.x >= xl - d.params.period * 10.0
+                    && p.x <= xr + d.params.period * 10.0
+                    && y.abs() <= hh + h;
+                if inside {
+                    let c = cell_of(y);
+                    kcell[c] = kcell[c].max(s.k_eff[idx]);
+                }
             }
-            creases.push((lens, crease));
+            creases.push((
+                *k,
+                stations
+                    .iter()
+                    .cloned()
+                    .zip(s.first.iter().cloned())
+                    .collect(),
+            ));
         }
         // the last crease k1 bounds lens k1 − 1
         let last = stations
@@ -405,7 +443,7 @@ impl<'a> Planner<'a> {
             .map(|&v| Ok((v, d.base_crease_point(k1, v)?)))
             .collect::<Result<Vec<_>>>()?;
         creases.push((k1, last));
-        Ok((columns, k, creases))
+        Ok((columns, kcell, creases))
     }
 
     /// Exact y-values where a base crease crosses an x-wall.
@@ -447,8 +485,12 @@ impl<'a> Planner<'a> {
 }
 
 /// Inserts crossing rows into `rows` (sorted, boundaries first and last).
-/// A crossing close to an interior row replaces it, so no sliver strips appear.
+/// A crossing close to a free interior row replaces it, so no sliver strips
+/// appear; boundary rows and crossings already placed are never moved.
 fn insert_rows(rows: &mut Vec<f64>, crossings: &[f64]) {
+    let mut pinned = vec![false; rows.len()];
+    pinned[0] = true;
+    *pinned.last_mut().unwrap() = true;
     for &y in crossings {
         let pos = rows.partition_point(|&r| r < y);
         let (lo, hi) = (rows[pos - 1], rows[pos.min(rows.len() - 1)]);
@@ -456,13 +498,28 @@ fn insert_rows(rows: &mut Vec<f64>, crossings: &[f64]) {
         if (y - lo).abs() < 1e-9 || (hi - y).abs() < 1e-9 {
             continue;
         }
-        if pos - 1 > 0 && y - lo < 0.1 * gap {
+        if !pinned[pos - 1] && y - lo < 0.1 * gap {
             rows[pos - 1] = y;
-        } else if pos < rows.len() - 1 && hi - y < 0.1 * gap {
+            pinned[pos - 1] = true;
+        } else if !pinned[pos] && hi - y < 0.1 * gap {
             rows[pos] = y;
+            pinned[pos] = true;
         } else {
             rows.insert(pos, y);
+            pinned.insert(pos, true);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::insert_rows;
+
+    #[test]
+    fn crossing_rows_are_never_moved() {
+        let mut rows = vec![-1.0, 0.0, 1.0];
+        insert_rows(&mut rows, &[0.05, 0.09, -0.5]);
+        assert_eq!(rows, vec![-1.0, -0.5, 0.05, 0.09, 1.0]);
     }
 }
 
@@ -547,14 +604,59 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
 
     // ---- base vertices -----------------------------------------------------
     progress.stage("base vertices", base_rows.len() as u64);
-    let base_row_data: Vec<BaseRow> = base_rows
-        .par_iter()
-        .map(|&y| {
-            let row = base_row(d, &base_columns, y, xl, xr);
-            progress.tick(1);
-            row
-        })
-        .collect::<Result<_>>()?;
+    let compute_rows = |ys: &[f64]| -> Result<Vec<BaseRow>> {
+        ys.par_iter()
+            .map(|&y| {
+                let row = base_row(d, &base_columns, y, xl, xr);
+                progress.tick(1);
+                row
+            })
+            .collect()
+    };
+    let mut base_row_data = compute_rows(&base_rows)?;
+    // Where an x-wall cuts a base lens, the trim curve between two rows is
+    // one edge: refine until its cut moves by at most one column per strip,
+    // so the trim edge meets the same chordal bound as the lens columns.
+    for _pass in 0..8 {
+        let mut extra = Vec::new();
+        for r in 0..base_rows.len() - 1 {
+            for side in [Side::Left, Side::Right] {
+                let (Some((ka, ta)), Some((kb, tb))) = (
+                    base_row_data[r].wall_cut(side),
+                    base_row_data[r + 1].wall_cut(side),
+                ) else {
+                    continue;
+                };
+                if ka != kb {
+                    continue; // a crease crosses the wall between: its crossing row bounds the strip
+                }
+                let cols = base_columns.get(&ka).copied().unwrap_or(2) as f64;
+                let pieces = ((ta - tb).abs() * cols).ceil() as usize;
+                for p in 1..pieces {
+                    extra.push(
+                        base_rows[r] + (base_rows[r + 1] - base_rows[r]) * p as f64 / pieces as f64,
+                    );
+                }
+            }
+        }
+        if extra.is_empty() {
+            break;
+        }
+        extra.sort_by(f64::total_cmp);
+        extra.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+        let new_rows = compute_rows(&extra)?;
+        let mut merged: Vec<(f64, BaseRow)> = base_rows
+            .drain(..)
+            .zip(base_row_data.drain(..))
+            .chain(extra.into_iter().zip(new_rows))
+            .collect();
+        merged.sort_by(|a, b| a.0.total_cmp(&b.0));
+        merged.dedup_by(|a, b| (a.0 - b.0).abs() < 1e-9);
+        for (y, row) in merged {
+            base_rows.push(y);
+            base_row_data.push(row);
+        }
+    }
 
     // ---- assemble ----------------------------------------------------------
     progress.stage("triangles", 1);
@@ -601,6 +703,7 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
             })
             .collect(),
         revealer_columns: rev_columns.clone(),
+        base_columns: base_columns.clone(),
     };
     let mut tris = Vec::new();
     let mut patches = Vec::new();
@@ -862,7 +965,9 @@ fn base_row(
             let (p, o, t) = cut(xr, (xr - x0) / (x1 - x0))?;
             (Some((p, o)), t)
         };
-        let margin = 0.25 / cols as f64;
+        // Columns closer than this to a cut are dropped (no slivers); the span
+        // next to a cut is then at most 1.1 columns.
+        let margin = 0.1 / cols as f64;
         // Interior vertices: the station v at which (t, v) has height y
         // varies smoothly from crease to crease, so start from the linear
         // blend with the creases' dy/dv, and warm-start the crease solves.

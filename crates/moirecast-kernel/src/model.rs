@@ -50,17 +50,39 @@ impl Design {
         self.surface().point(u, v) - self.base_offset(u, v) * self.surface().normal(u, v)
     }
 
-    /// Unit normal of s, on the same side as n. An offset surface (a = 0)
-    /// shares f's normal exactly; otherwise central differences of s (only
-    /// the bulge direction of base lenses depends on it).
+    /// Unit normal of s, on the same side as n, from analytic derivatives:
+    /// s = f − δ n with δ = (1 − a)·d + a·D_s·λ, so
+    /// s_u = f_u − δ_u n − δ n_u (likewise in v), with n_u from the second
+    /// derivatives of f. An offset surface (a = 0) shares f's normal exactly.
     pub fn base_normal(&self, u: f64, v: f64) -> DVec3 {
+        let surface = self.surface();
         if self.params.base.a == 0.0 {
-            return self.surface().normal(u, v);
+            return surface.normal(u, v);
         }
-        let h = 1e-5;
-        let su = self.base_surface(u + h, v) - self.base_surface(u - h, v);
-        let sv = self.base_surface(u, v + h) - self.base_surface(u, v - h);
-        su.cross(sv).normalize()
+        let jet = surface.jet(u, v);
+        let big_n = jet.du.cross(jet.dv);
+        let len = big_n.length();
+        let n = big_n / len;
+        let normal_derivative = |big_n_d: DVec3| (big_n_d - n * n.dot(big_n_d)) / len;
+        let n_u = normal_derivative(jet.duu.cross(jet.dv) + jet.du.cross(jet.duv));
+        let n_v = normal_derivative(jet.duv.cross(jet.dv) + jet.du.cross(jet.dvv));
+        // λ = |c| / T with c = f(u + T/2) − f(u − T/2)
+        let t = self.params.period;
+        let (jp, jm) = (surface.jet(u + t / 2.0, v), surface.jet(u - t / 2.0, v));
+        let c = jp.p - jm.p;
+        let c_hat = c / c.length();
+        let (lambda, lambda_u, lambda_v) = (
+            c.length() / t,
+            c_hat.dot(jp.du - jm.du) / t,
+            c_hat.dot(jp.dv - jm.dv) / t,
+        );
+        let a = self.params.base.a;
+        let focal = self.standard.focal_depth;
+        let delta = (1.0 - a) * self.d + a * focal * lambda;
+        let (delta_u, delta_v) = (a * focal * lambda_u, a * focal * lambda_v);
+        let s_u = jet.du - delta_u * n - delta * n_u;
+        let s_v = jet.dv - delta_v * n - delta * n_v;
+        s_u.cross(s_v).normalize()
     }
 
     /// Base shift E(u, v) = A·T·e(u, v) (mm).
@@ -166,4 +188,46 @@ impl Design {
 pub enum LensRef {
     Revealer(i64),
     Base(i64),
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::*;
+
+    #[test]
+    fn base_normal_matches_finite_differences() {
+        for a in [0.0, 0.3, 1.0] {
+            let p = DesignParams {
+                surface: PitchSurface::Sphere { radius: -60.0 },
+                width: 20.0,
+                height: 10.0,
+                period: 0.5,
+                lens: LensParams {
+                    afov: 1.0,
+                    index: 1.41,
+                    rule: LensRule::ConstantAfov,
+                },
+                base: BaseParams {
+                    a,
+                    d: None,
+                    levels: 0.0,
+                    afov: None,
+                },
+                profile: Profile::Flat,
+                tolerance: 0.002,
+            };
+            let d = Design::new(p).unwrap();
+            for (u, v) in [(0.0, 0.0), (7.0, -3.0), (-9.5, 4.5)] {
+                let h = 1e-5;
+                let su = d.base_surface(u + h, v) - d.base_surface(u - h, v);
+                let sv = d.base_surface(u, v + h) - d.base_surface(u, v - h);
+                let fd = su.cross(sv).normalize();
+                assert!(
+                    (fd - d.base_normal(u, v)).length() < 1e-8,
+                    "a = {a}: {fd} vs {}",
+                    d.base_normal(u, v)
+                );
+            }
+        }
+    }
 }

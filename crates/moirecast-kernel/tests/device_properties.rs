@@ -1,0 +1,249 @@
+//! Properties of built devices: unit cases worked by hand, and property
+//! tests over random valid designs. Every invariant is measured on every
+//! sample (vertices re-projected one by one, every lens triangle sampled).
+
+use moirecast_kernel::check::solid_checks;
+use moirecast_kernel::mesher::{mesh_device, DeviceMesh};
+use moirecast_kernel::progress::Silent;
+use moirecast_kernel::*;
+use proptest::prelude::*;
+
+fn params(surface: PitchSurface, lenses: usize, height: f64, period: f64) -> DesignParams {
+    DesignParams {
+        surface,
+        width: lenses as f64 * period,
+        height,
+        period,
+        lens: LensParams {
+            afov: 60f64.to_radians(),
+            index: 1.41,
+            rule: LensRule::ConstantAfov,
+        },
+        base: BaseParams {
+            a: 0.0,
+            d: None,
+            levels: 0.0,
+            afov: None,
+        },
+        profile: Profile::Flat,
+        tolerance: 0.002,
+    }
+}
+
+/// Every invariant of METHOD §7.1–§7.3 that the device mesh must satisfy,
+/// measured exhaustively.
+fn assert_device_invariants(d: &Design, dm: &DeviceMesh) {
+    for c in solid_checks(&dm.mesh) {
+        assert!(c.passed, "{c:?}");
+    }
+    let checks = [
+        measure::vertex_on_surface(d, dm, 1),
+        measure::surface_to_mesh(d, dm, 1),
+        measure::walls_on_outline(d, dm),
+        measure::creases_shared(d, dm),
+        measure::base_creases_follow_shift(d, dm),
+    ];
+    for c in checks {
+        assert!(c.passed, "{c:?}");
+    }
+    let stats = measure::revealer_lens_stats(d, dm);
+    assert!(
+        stats.arcs >= d.lenses,
+        "every lens measured at least once: {} arcs",
+        stats.arcs
+    );
+    assert!(
+        stats.circle_residual < 1e-9,
+        "station rows lie on circles: {}",
+        stats.circle_residual
+    );
+    if d.params.lens.rule == LensRule::ConstantAfov {
+        let alpha = d.params.lens.afov.to_degrees();
+        assert!(
+            (stats.afov_deg.min - alpha).abs() < 1e-6 && (stats.afov_deg.max - alpha).abs() < 1e-6,
+            "measured AFOV {:?} vs {alpha}",
+            stats.afov_deg
+        );
+    }
+}
+
+/// Inscribed-polygon area of a circular segment of radius r and angle a, cut into n chords.
+fn polygon_segment(r: f64, a: f64, n: usize) -> f64 {
+    0.5 * r * r * (n as f64 * (a / n as f64).sin() - a.sin())
+}
+
+#[test]
+fn plane_every_lens_is_the_standard_lens() {
+    let mut p = params(PitchSurface::Plane, 16, 3.0, 0.5);
+    p.base.levels = 1.0;
+    p.profile = Profile::Rings { wavelength: 6.0 };
+    let d = Design::new(p).unwrap();
+    let dm = mesh_device(&d, &Silent).unwrap();
+    assert_device_invariants(&d, &dm);
+    let s = measure::revealer_lens_stats(&d, &dm);
+    let std = d.standard;
+    for (got, want, what) in [
+        (s.pitch, std.width, "pitch"),
+        (s.radius, std.radius, "radius"),
+        (s.sag, std.sag, "sag"),
+        (s.focal_depth, std.focal_depth, "focal depth"),
+    ] {
+        assert!(
+            (got.min - want).abs() < 1e-12 && (got.max - want).abs() < 1e-12,
+            "{what}: {got:?} vs {want}"
+        );
+    }
+}
+
+#[test]
+fn cylinder_preserves_the_pitch_exactly() {
+    // A developable surface maps u isometrically: the arc length between
+    // neighbouring creases on the pitch surface is exactly T, and the chord
+    // is 2R sin(T / 2R).
+    let (r, t) = (25.0, 0.5);
+    let d = Design::new(params(PitchSurface::Cylinder { radius: r }, 40, 4.0, t)).unwrap();
+    let dm = mesh_device(&d, &Silent).unwrap();
+    assert_device_invariants(&d, &dm);
+    let row = dm.revealer_rows.len() / 2;
+    for i in 0..d.lenses {
+        let a = dm.mesh.positions[dm.revealer_vertex(row, i, 0) as usize];
+        let b = dm.mesh.positions[dm.revealer_vertex(row, i, dm.revealer_columns[i]) as usize];
+        // angle around the cylinder axis (0, y, −R), measured from the vertices
+        let angle = |p: glam::DVec3| p.x.atan2(p.z + r);
+        let arc = r * (angle(b) - angle(a));
+        assert!(
+            (arc - t).abs() < 1e-12,
+            "lens {i}: pitch along the surface {arc}"
+        );
+        assert!(((b - a).length() - 2.0 * r * (t / (2.0 * r)).sin()).abs() < 1e-12);
+    }
+    let s = measure::revealer_lens_stats(&d, &dm);
+    let chord = 2.0 * r * (t / (2.0 * r)).sin();
+    assert!((s.pitch.min - chord).abs() < 1e-12 && (s.pitch.max - chord).abs() < 1e-12);
+}
+
+#[test]
+fn equal_radius_lenses_keep_the_standard_radius() {
+    let mut p = params(PitchSurface::Saddle { radius: 30.0 }, 20, 4.0, 0.5);
+    p.lens.rule = LensRule::EqualRadius;
+    let d = Design::new(p).unwrap();
+    let dm = mesh_device(&d, &Silent).unwrap();
+    assert_device_invariants(&d, &dm);
+    let s = measure::revealer_lens_stats(&d, &dm);
+    assert!(
+        (s.radius.min - d.standard.radius).abs() < 1e-9
+            && (s.radius.max - d.standard.radius).abs() < 1e-9,
+        "{:?}",
+        s.radius
+    );
+    assert!(
+        s.afov_deg.max > 60.0,
+        "wider chords on the saddle give wider angles: {:?}",
+        s.afov_deg
+    );
+}
+
+#[test]
+fn meshes_are_deterministic() {
+    let mut p = params(PitchSurface::Saddle { radius: 40.0 }, 12, 3.0, 0.5);
+    p.base.levels = 1.0;
+    p.profile = Profile::Bump { sigma: 2.0 };
+    let d = Design::new(p).unwrap();
+    let a = mesh_device(&d, &Silent).unwrap();
+    let b = mesh_device(&d, &Silent).unwrap();
+    assert_eq!(a.mesh, b.mesh);
+}
+
+fn surface_strategy() -> impl Strategy<Value = PitchSurface> {
+    prop_oneof![
+        Just(PitchSurface::Plane),
+        (30.0..120.0f64, prop::bool::ANY).prop_map(|(r, s)| PitchSurface::Saddle {
+            radius: if s { r } else { -r }
+        }),
+        (30.0..120.0f64, prop::bool::ANY).prop_map(|(r, s)| PitchSurface::Paraboloid {
+            radius: if s { r } else { -r }
+        }),
+        (20.0..120.0f64, prop::bool::ANY).prop_map(|(r, s)| PitchSurface::Cylinder {
+            radius: if s { r } else { -r }
+        }),
+        (30.0..120.0f64, prop::bool::ANY).prop_map(|(r, s)| PitchSurface::Sphere {
+            radius: if s { r } else { -r }
+        }),
+    ]
+}
+
+fn profile_strategy() -> impl Strategy<Value = Profile> {
+    prop_oneof![
+        Just(Profile::Flat),
+        (2.0..10.0f64).prop_map(|w| Profile::Rings { wavelength: w }),
+        (0.0..3.2f64).prop_map(|a| Profile::ramp(a, 8.0, 6.0)),
+        (1.0..4.0f64).prop_map(|s| Profile::Bump { sigma: s }),
+    ]
+}
+
+prop_compose! {
+    fn design_strategy()(
+        surface in surface_strategy(),
+        profile in profile_strategy(),
+        lenses in 3usize..14,
+        period in 0.3..1.0f64,
+        height in 1.5..5.0f64,
+        afov in 30.0..90.0f64,
+        index in 1.35..1.6f64,
+        levels in 0.0..1.5f64,
+        a in prop_oneof![Just(0.0), 0.0..1.0f64],
+        d_scale in prop_oneof![Just(None), (0.3..1.5f64).prop_map(Some)],
+        tol_scale in 0.02..0.2f64,
+        equal_radius in proptest::bool::weighted(0.15),
+    ) -> Option<Design> {
+        let std = StandardLens::new(period, afov.to_radians(), index);
+        let p = DesignParams {
+            surface,
+            width: lenses as f64 * period,
+            height,
+            period,
+            lens: LensParams { afov: afov.to_radians(), index, rule: if equal_radius { LensRule::EqualRadius } else { LensRule::ConstantAfov } },
+            base: BaseParams { a, d: d_scale.map(|s| s * std.focal_depth), levels, afov: None },
+            profile,
+            tolerance: (tol_scale * std.sag).max(Tolerance::MIN_MM),
+        };
+        Design::new(p).ok()
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// Closed and oriented, vertices on their exact surfaces, exact surfaces
+    /// within tolerance of the mesh, AFOV measured equal to α, creases shared.
+    #[test]
+    fn random_designs_keep_every_invariant(design in design_strategy()) {
+        prop_assume!(design.is_some());
+        let d = design.unwrap();
+        let dm = mesh_device(&d, &Silent).unwrap();
+        assert_device_invariants(&d, &dm);
+    }
+
+    /// The plane device with an unshifted base is a slab with standard lenses
+    /// on both faces: its volume has a closed form. The mesh volume matches the
+    /// inscribed-polygon form to round-off, and the exact form within area × tolerance.
+    #[test]
+    fn plane_volume_has_its_closed_form(lenses in 2usize..30, period in 0.3..1.5f64, height in 1.0..8.0f64,
+                                        afov in 20.0..110.0f64, d_scale in 0.5..2.0f64, tol_scale in 0.02..0.3f64) {
+        let std = StandardLens::new(period, afov.to_radians(), 1.41);
+        let mut p = params(PitchSurface::Plane, lenses, height, period);
+        p.lens.afov = afov.to_radians();
+        p.base.d = Some(d_scale * std.focal_depth);
+        p.tolerance = (tol_scale * std.sag).max(Tolerance::MIN_MM);
+        let Ok(d) = Design::new(p) else { return Err(TestCaseError::reject("invalid")) };
+        let dm = mesh_device(&d, &Silent).unwrap();
+        let (w, a, r) = (d.params.width, d.params.lens.afov, d.standard.radius);
+        let revealer: f64 = dm.revealer_columns.iter().map(|&n| polygon_segment(r, a, n)).sum();
+        let base: f64 = (0..lenses as i64).map(|k| polygon_segment(r, a, dm.base_columns[&k])).sum();
+        let discrete = w * height * d.d + height * (revealer + base);
+        let exact = w * height * d.d + 2.0 * lenses as f64 * height * 0.5 * r * r * (a - a.sin());
+        let v = dm.mesh.volume();
+        prop_assert!((v - discrete).abs() <= 1e-9 * discrete, "mesh {v} vs inscribed closed form {discrete}");
+        prop_assert!(v <= exact && exact - v <= 2.0 * w * height * d.tolerance.mm(), "mesh {v} vs exact {exact}");
+    }
+}
