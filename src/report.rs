@@ -195,7 +195,10 @@ pub fn device_report(spec: &Spec, build: &DeviceBuild, stl_bytes: usize) -> Devi
     );
     DeviceReport {
         moirecast: env!("CARGO_PKG_VERSION"),
-        spec: spec.origin.clone(),
+        spec: std::path::Path::new(&spec.origin)
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_else(|| spec.origin.clone()),
         design: design_echo(spec),
         derived: Derived {
             N: d.lenses,

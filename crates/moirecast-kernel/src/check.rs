@@ -53,9 +53,10 @@ impl CheckResult {
     }
 }
 
-/// Smallest triangle altitude (mm) that is not a degenerate triangle: far
-/// below any tolerance, far above round-off.
-pub const MIN_ALTITUDE_MM: f64 = 1e-7;
+/// Smallest triangle altitude (mm) that is not a degenerate triangle: 10 nm,
+/// about five f32 steps at 30 mm, so no triangle can flip when written as
+/// STL; far below any tolerance.
+pub const MIN_ALTITUDE_MM: f64 = 1e-5;
 
 /// The solid checks every mesh must pass before it is written
 /// (METHOD §7.1): finite, closed and oriented, one shell of genus 0,

@@ -389,6 +389,8 @@ impl Design {
             PitchSurface::Plane => "plane".into(),
         };
         let (mut kmax, mut smax, mut dmax, mut fold_at) = (0.0f64, 0.0f64, 0.0f64, DVec2::ZERO);
+        let (mut smax_inside, mut steep_at) = (0.0f64, DVec2::ZERO);
+        let (hw, hh) = (self.params.width / 2.0, self.half_height);
         let mut worst_fold = 0.0f64;
         let pts: Vec<DVec2> = self.grid(64).collect();
         for q in pts {
@@ -420,23 +422,17 @@ impl Design {
                 fold_at = q;
             }
             kmax = kmax.max(k);
-            smax = smax.max(slope);
+            if slope > smax {
+                smax = slope;
+                steep_at = q;
+            }
+            if q.x.abs() <= hw && q.y.abs() <= hh {
+                smax_inside = smax_inside.max(slope);
+            }
         }
         self.max_curvature = kmax;
         self.max_slope = smax;
-        let flank = (smax + self.params.lens.afov.max(base_afov) / 2.0).to_degrees();
-        if flank > MAX_FLANK_DEG {
-            return Err(err(
-                radius_param,
-                radius_value,
-                format!(
-                    "the surface slopes {:.1}° and the lenses add {:.1}°: lens flanks reach {flank:.1}°, over the {MAX_FLANK_DEG}° limit (the device must stay a graph over xy, with vertical walls)",
-                    smax.to_degrees(),
-                    self.params.lens.afov.max(base_afov).to_degrees() / 2.0
-                ),
-                "use a larger radius, a smaller layout or a smaller AFOV",
-            ));
-        }
+        // The fold is checked first: a folding base is the root cause when both fail.
         if worst_fold >= MAX_FOLD {
             let allowed = MAX_FOLD / kmax;
             let d_note = if self.params.base.a > 0.0 {
@@ -452,6 +448,38 @@ impl Design {
                     fold_at.x, fold_at.y, kmax
                 ),
                 format!("use d ≤ {allowed:.3} mm, or a flatter surface"),
+            ));
+        }
+        let half_afov = self.params.lens.afov.max(base_afov) / 2.0;
+        let flank = (smax + half_afov).to_degrees();
+        let d_is_the_cause = self.params.base.d.is_some() && self.d > self.standard.focal_depth;
+        if flank > MAX_FLANK_DEG
+            && d_is_the_cause
+            && (smax_inside + half_afov).to_degrees() <= MAX_FLANK_DEG
+        {
+            return Err(err(
+                Param::BaseD,
+                format!("{:.4}", self.d),
+                format!(
+                    "the base lies up to {dmax:.2} mm below the surface, so the surface is needed {:.2} mm beyond the layout; at layout ({:.1}, {:.1}) mm it slopes {:.1}° and lens flanks would reach {flank:.1}°, over the {MAX_FLANK_DEG}° limit",
+                    self.margin,
+                    steep_at.x,
+                    steep_at.y,
+                    smax.to_degrees()
+                ),
+                format!("use a smaller d (D_s = {:.4} mm is the focal depth)", self.standard.focal_depth),
+            ));
+        }
+        if flank > MAX_FLANK_DEG {
+            return Err(err(
+                radius_param,
+                radius_value,
+                format!(
+                    "the surface slopes {:.1}° and the lenses add {:.1}°: lens flanks reach {flank:.1}°, over the {MAX_FLANK_DEG}° limit (the device must stay a graph over xy, with vertical walls)",
+                    smax.to_degrees(),
+                    self.params.lens.afov.max(base_afov).to_degrees() / 2.0
+                ),
+                "use a larger radius, a smaller layout or a smaller AFOV",
             ));
         }
         self.margin = dmax + (self.params.base.levels + 2.0) * self.params.period;

@@ -25,7 +25,7 @@ use crate::lens::LensArc;
 use crate::mesh::Mesh;
 use crate::model::LensRef;
 use crate::progress::Progress;
-use crate::solve::{chord_1d, newton_1d, newton_2d};
+use crate::solve::{bracketed_secant, chord_1d, newton_1d, newton_2d};
 use crate::tolerance::WALL_SNAP_MM;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -454,17 +454,16 @@ impl<'a> Planner<'a> {
         for (k, samples) in creases {
             for wall in [d.outline_x.0, d.outline_x.1] {
                 for w in samples.windows(2) {
+                    // A sign change between survey stations is a crossing
+                    // (the wall snap is a rule for mesh rows, not for samples).
                     let (s0, s1) = (w[0].1.x - wall, w[1].1.x - wall);
-                    if s0.abs() <= WALL_SNAP_MM
-                        || s1.abs() <= WALL_SNAP_MM
-                        || (s0 > 0.0) == (s1 > 0.0)
-                    {
+                    if (s0 > 0.0) == (s1 > 0.0) {
                         continue;
                     }
-                    // bisect-safe start, then Newton on the crease's x
-                    let v0 = w[0].0 + (w[1].0 - w[0].0) * s0 / (s0 - s1);
-                    let v = newton_1d(
-                        v0,
+                    // the root bracketed by these two stations, not another one
+                    let v = bracketed_secant(
+                        w[0].0,
+                        w[1].0,
                         &|| format!("base crease {k} meeting the wall x = {wall}"),
                         |v| {
                             d.base_crease_point(*k, v)

@@ -91,6 +91,48 @@ pub fn chord_1d(
     Err(KernelError::Solver(what()))
 }
 
+/// Solves g(x) = 0 on [lo, hi], where g(lo) and g(hi) have opposite signs,
+/// by the Illinois variant of regula falsi: never leaves the bracket, so it
+/// finds the root that was bracketed, not another one.
+pub fn bracketed_secant(
+    mut lo: f64,
+    mut hi: f64,
+    what: &dyn Fn() -> String,
+    g: impl Fn(f64) -> f64,
+) -> Result<f64> {
+    let (mut g_lo, mut g_hi) = (g(lo), g(hi));
+    if !(g_lo.is_finite() && g_hi.is_finite()) || (g_lo > 0.0) == (g_hi > 0.0) {
+        return Err(KernelError::Solver(what()));
+    }
+    let mut side = 0i8;
+    for _ in 0..200 {
+        let x = (lo * g_hi - hi * g_lo) / (g_hi - g_lo);
+        let gx = g(x);
+        if !gx.is_finite() {
+            break;
+        }
+        if gx.abs() <= SOLVE_RESIDUAL_MM || (hi - lo).abs() <= f64::EPSILON * x.abs().max(1.0) {
+            return Ok(x);
+        }
+        if (gx > 0.0) == (g_hi > 0.0) {
+            hi = x;
+            g_hi = gx;
+            if side == 1 {
+                g_lo *= 0.5;
+            }
+            side = 1;
+        } else {
+            lo = x;
+            g_lo = gx;
+            if side == -1 {
+                g_hi *= 0.5;
+            }
+            side = -1;
+        }
+    }
+    Err(KernelError::Solver(what()))
+}
+
 /// Solves G(p) = 0 for G: ℝ² → ℝ² by Newton's method with a central-difference
 /// Jacobian, starting at `p0`.
 pub fn newton_2d(
@@ -134,6 +176,11 @@ mod tests {
         })
         .unwrap();
         assert!((x - 2f64.cbrt()).abs() < 1e-13);
+        let x = bracketed_secant(0.0, 3.0, &what, |x| x * x * x - 2.0).unwrap();
+        assert!((x - 2f64.cbrt()).abs() < 1e-11);
+        // two roots (±1): the bracket picks the one inside it
+        let x = bracketed_secant(0.2, 5.0, &what, |x| x * x - 1.0).unwrap();
+        assert!((x - 1.0).abs() < 1e-11);
         let p = newton_2d(DVec2::new(1.0, 1.0), &what, |p| {
             DVec2::new(p.x * p.x + p.y - 3.0, p.x - p.y * p.y + 1.0)
         })

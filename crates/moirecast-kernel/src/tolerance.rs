@@ -29,6 +29,8 @@ impl Tolerance {
 /// surface" are on it to this distance.
 pub const SOLVE_RESIDUAL_MM: f64 = 1e-11;
 
-/// Distance (mm) under which a crease counts as lying on a side wall.
-/// Far below any tolerance, far above solver residuals.
-pub const WALL_SNAP_MM: f64 = 1e-8;
+/// Distance (mm) under which a base crease counts as lying on a side wall
+/// (it may touch the wall tangentially). Twice [`crate::check::MIN_ALTITUDE_MM`],
+/// so a crease just outside the snap leaves no triangle thinner than that;
+/// far below any tolerance.
+pub const WALL_SNAP_MM: f64 = 2e-5;

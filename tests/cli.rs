@@ -1,0 +1,266 @@
+//! The `moirecast` binary end to end: good specs build, bad specs fail with
+//! an error that names the key, and a failed run writes nothing.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const BIN: &str = env!("CARGO_BIN_EXE_moirecast");
+
+/// A small valid design: fast in debug builds.
+const SMALL: &str = r#"
+[surface]
+kind = "saddle"
+radius = 40.0
+[layout]
+width = 4.0
+height = 3.0
+period = 0.5
+[lens]
+afov = 60.0
+index = 1.41
+[base]
+kind = "dual-lens"
+a = 0.0
+d = "focal"
+levels = 1.0
+[profile]
+kind = "bump"
+sigma = 1.5
+[mesh]
+tolerance = 0.004
+"#;
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("moirecast-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn run(spec_text: &str, dir: &Path) -> (bool, String, PathBuf) {
+    let spec = dir.join("spec.toml");
+    std::fs::write(&spec, spec_text).unwrap();
+    std::fs::create_dir_all(dir.join("profiles")).unwrap();
+    std::fs::copy(
+        concat!(env!("CARGO_MANIFEST_DIR"), "/molds/profiles/horse.png"),
+        dir.join("profiles/horse.png"),
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let o = Command::new(BIN)
+        .arg("device")
+        .arg(&spec)
+        .arg("-o")
+        .arg(&out)
+        .arg("--quiet")
+        .output()
+        .unwrap();
+    (
+        o.status.success(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+        out,
+    )
+}
+
+#[test]
+fn a_small_design_builds_with_a_full_report() {
+    let dir = scratch("good");
+    let (ok, err, out) = run(SMALL, &dir);
+    assert!(ok, "{err}");
+    let stl = std::fs::read(out.join("device.stl")).unwrap();
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let triangles = report["files"]["device.stl"]["triangles"].as_u64().unwrap() as usize;
+    assert_eq!(stl.len(), 84 + 50 * triangles);
+    assert_eq!(report["derived"]["N"], 8);
+    assert!((report["derived"]["r_s"].as_f64().unwrap() - 0.5).abs() < 1e-12);
+    assert!((report["lenses"]["afov_deg"]["min"].as_f64().unwrap() - 60.0).abs() < 1e-6);
+    assert!(
+        report["files"]["device.stl"]["volume_mm3"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    let checks = report["checks"].as_array().unwrap();
+    assert!(checks.len() >= 12, "{checks:?}");
+    for c in checks {
+        assert_eq!(c["passed"], true, "{c}");
+    }
+    for name in [
+        "closed-oriented",
+        "surface-to-mesh",
+        "vertex-on-surface",
+        "measured-afov",
+        "genus-0",
+    ] {
+        assert!(
+            checks.iter().any(|c| c["name"] == name),
+            "missing check {name}"
+        );
+    }
+    // no temporary files left
+    let names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names.len(), 2, "{names:?}");
+}
+
+#[test]
+fn outputs_are_byte_identical_across_runs() {
+    let (a, b) = (scratch("det-a"), scratch("det-b"));
+    let (ok_a, _, out_a) = run(SMALL, &a);
+    let (ok_b, _, out_b) = run(SMALL, &b);
+    assert!(ok_a && ok_b);
+    for f in ["device.stl", "report.json"] {
+        let (x, y) = (
+            std::fs::read(out_a.join(f)).unwrap(),
+            std::fs::read(out_b.join(f)).unwrap(),
+        );
+        assert!(x == y, "{f} differs between runs");
+    }
+}
+
+/// (what is wrong, the spec edit, the key the error must name, a phrase of the fix or problem)
+const BAD: &[(&str, &str, &str, &str)] = &[
+    (
+        "AFOV out of range",
+        "afov = 60.0|afov = 170.0",
+        "lens.afov",
+        "between 10 and 120",
+    ),
+    (
+        "AFOV not a number",
+        "afov = 60.0|afov = nan",
+        "lens.afov",
+        "finite",
+    ),
+    (
+        "width not a whole number of periods",
+        "width = 4.0|width = 4.3",
+        "layout.width",
+        "whole number",
+    ),
+    (
+        "folding offset",
+        "d = \"focal\"|d = 45.0",
+        "base.d",
+        "folds",
+    ),
+    (
+        "offset below zero",
+        "d = \"focal\"|d = -1.0",
+        "base.d",
+        "d > 0",
+    ),
+    (
+        "elevation too steep",
+        "sigma = 1.5|sigma = 0.3",
+        "base.levels",
+        "too steep",
+    ),
+    (
+        "missing image",
+        "kind = \"bump\"\nsigma = 1.5|image = \"profiles/nothing-here.png\"",
+        "profile.image",
+        "cannot read",
+    ),
+    (
+        "unknown key",
+        "index = 1.41|index = 1.41\ncolour = \"red\"",
+        "colour",
+        "unknown field",
+    ),
+    (
+        "unknown surface kind",
+        "kind = \"saddle\"|kind = \"torus\"",
+        "torus",
+        "unknown variant",
+    ),
+    (
+        "surface too curved for the lenses",
+        "radius = 40.0|radius = 2.5",
+        "surface.radius",
+        "use a larger radius",
+    ),
+    (
+        "formula with an unknown variable",
+        "kind = \"saddle\"\nradius = 40.0|kind = \"formula\"\nz = \"x*q\"",
+        "surface.z",
+        "`q`",
+    ),
+    (
+        "tolerance larger than the lens",
+        "tolerance = 0.004|tolerance = 0.05",
+        "mesh.tolerance",
+        "sag",
+    ),
+    (
+        "unknown material",
+        "index = 1.41|material = \"unobtainium\"",
+        "lens.material",
+        "sylgard-184",
+    ),
+    (
+        "base AFOV out of range",
+        "levels = 1.0|levels = 1.0\nafov = 5.0",
+        "base.afov",
+        "between 10 and 120",
+    ),
+];
+
+#[test]
+fn bad_specs_name_the_key_and_write_nothing() {
+    for (i, (what, edit, key, phrase)) in BAD.iter().enumerate() {
+        let (from, to) = edit.split_once('|').unwrap();
+        assert!(SMALL.contains(from), "{what}: edit does not apply");
+        let spec = SMALL.replacen(from, to, 1);
+        let dir = scratch(&format!("bad-{i}"));
+        let (ok, err, out) = run(&spec, &dir);
+        assert!(!ok, "{what}: the spec was accepted");
+        assert!(
+            err.contains(key),
+            "{what}: error does not name `{key}`:\n{err}"
+        );
+        assert!(
+            err.contains(phrase),
+            "{what}: error lacks `{phrase}`:\n{err}"
+        );
+        assert!(
+            !out.exists(),
+            "{what}: something was written to {}",
+            out.display()
+        );
+    }
+}
+
+#[test]
+fn a_missing_spec_file_is_a_clear_error() {
+    let o = Command::new(BIN)
+        .args([
+            "device",
+            "/nonexistent/spec.toml",
+            "-o",
+            "/tmp/moirecast-never",
+        ])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("cannot read spec"));
+    assert!(!Path::new("/tmp/moirecast-never").exists());
+}
+
+#[test]
+fn every_shipped_spec_parses_and_validates() {
+    let molds = Path::new(env!("CARGO_MANIFEST_DIR")).join("molds");
+    let mut n = 0;
+    for e in std::fs::read_dir(&molds).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "toml") {
+            moirecast_spec::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            n += 1;
+        }
+    }
+    assert!(n >= 4);
+    moirecast_spec::default_spec().unwrap();
+}
