@@ -1,1 +1,82 @@
-fn main() {}
+//! Benchmark of the reference design (molds/saddle-horse.toml: 120 lenses,
+//! 2 µm): spec → mesh → validated STL on disk, plus the report's checks.
+//! Prints per-stage medians over repeated runs; peak memory is measured
+//! from outside with `/usr/bin/time -v` (see README).
+//!
+//! `cargo bench --bench device [-- SPEC [RUNS]]`
+
+use moirecast_kernel::mesher::mesh_device;
+use moirecast_kernel::progress::Silent;
+use std::time::Instant;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let spec_path = args
+        .first()
+        .cloned()
+        .unwrap_or_else(|| concat!(env!("CARGO_MANIFEST_DIR"), "/molds/saddle-horse.toml").into());
+    let runs: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(9);
+    let out = std::env::temp_dir().join(format!("moirecast-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let (mut load, mut mesh_t, mut stl_t, mut checks_t, mut total) =
+        (vec![], vec![], vec![], vec![], vec![]);
+    let (mut validate_t, mut encode_t, mut write_t) = (vec![], vec![], vec![]);
+    let mut triangles = (0, 0);
+    for _ in 0..runs {
+        let t0 = Instant::now();
+        let spec = moirecast_spec::load(std::path::Path::new(&spec_path)).unwrap();
+        let t1 = Instant::now();
+        let dm = mesh_device(&spec.design, &Silent).unwrap();
+        let t2 = Instant::now();
+        let solid = moirecast_export::validate("device.stl", &dm.mesh).unwrap();
+        let tv = Instant::now();
+        let bytes = moirecast_export::stl_bytes("device.stl", solid).unwrap();
+        let te = Instant::now();
+        std::fs::write(out.join("device.stl"), &bytes).unwrap();
+        let t3 = Instant::now();
+        validate_t.push((tv - t2).as_secs_f64());
+        encode_t.push((te - tv).as_secs_f64());
+        write_t.push((t3 - te).as_secs_f64());
+        let build = moirecast::build_device(&spec.design, &Silent).unwrap();
+        let t4 = Instant::now();
+        assert!(build.validated().0.iter().all(|c| c.passed));
+        triangles = (dm.stats.triangles, dm.stats.uniform_triangles);
+        load.push((t1 - t0).as_secs_f64());
+        mesh_t.push((t2 - t1).as_secs_f64());
+        stl_t.push((t3 - t2).as_secs_f64());
+        checks_t.push((t4 - t3).as_secs_f64() - (t2 - t1).as_secs_f64());
+        total.push((t3 - t1).as_secs_f64());
+    }
+    let ms = |v: Vec<f64>| median(v) * 1e3;
+    println!("design            {spec_path}");
+    println!(
+        "runs              {runs} (medians; {} threads)",
+        rayon::current_num_threads()
+    );
+    println!(
+        "triangles         {} (a uniform grid needs {} for the same tolerance: {:.2}x)",
+        triangles.0,
+        triangles.1,
+        triangles.1 as f64 / triangles.0 as f64
+    );
+    println!("spec + profile    {:8.1} ms", ms(load));
+    println!("mesh              {:8.1} ms", ms(mesh_t));
+    println!(
+        "STL check+write   {:8.1} ms  (solid checks {:.1}, encode {:.1}, write {:.1})",
+        ms(stl_t),
+        ms(validate_t),
+        ms(encode_t),
+        ms(write_t)
+    );
+    println!("mesh + STL        {:8.1} ms   (goal < 300 ms)", ms(total));
+    println!("report checks     {:8.1} ms", ms(checks_t));
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -6,7 +6,7 @@ pub mod report;
 
 use anyhow::{bail, Context, Result};
 use moirecast_export::{stl_bytes, OutputSet};
-use moirecast_kernel::check::{solid_checks, CheckResult};
+use moirecast_kernel::check::{CheckResult, SolidMesh};
 use moirecast_kernel::mesher::{mesh_device, DeviceMesh};
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{measure, Design};
@@ -23,7 +23,18 @@ const REPORT_TRIANGLE_SAMPLES: usize = 20000;
 pub struct DeviceBuild {
     pub mesh: DeviceMesh,
     pub lens_stats: measure::LensStats,
+    /// Measurements against the exact model (METHOD §7.2–§7.3).
     pub checks: Vec<CheckResult>,
+}
+
+impl DeviceBuild {
+    /// Runs the solid checks (METHOD §7.1) once: all checks, solid ones
+    /// first, and the mesh as a [`SolidMesh`] if those passed.
+    pub fn validated(&self) -> (Vec<CheckResult>, Option<SolidMesh<'_>>) {
+        let (mut checks, solid) = SolidMesh::validate(&self.mesh.mesh);
+        checks.extend(self.checks.iter().cloned());
+        (checks, solid)
+    }
 }
 
 /// The measured-AFOV check: every measured revealer arc spans α
@@ -50,7 +61,7 @@ fn afov_check(design: &Design, stats: &measure::LensStats) -> Option<CheckResult
 pub fn build_device(design: &Design, progress: &dyn Progress) -> Result<DeviceBuild> {
     let mesh = mesh_device(design, progress).context("meshing the device")?;
     progress.stage("checking", 1);
-    let mut checks = solid_checks(&mesh.mesh);
+    let mut checks = Vec::new();
     let v_stride = (mesh.mesh.positions.len() / REPORT_VERTEX_SAMPLES).max(1);
     let t_stride = (mesh.mesh.triangles.len() / REPORT_TRIANGLE_SAMPLES).max(1);
     checks.push(measure::vertex_on_surface(design, &mesh, v_stride));
@@ -79,7 +90,8 @@ pub fn build_device(design: &Design, progress: &dyn Progress) -> Result<DeviceBu
 /// `device.stl` and `report.json` into `out` — all of them, or nothing.
 pub fn run_device(spec: &Spec, out: &Path, progress: &dyn Progress) -> Result<Vec<PathBuf>> {
     let build = build_device(&spec.design, progress)?;
-    if let Some(c) = build.checks.iter().find(|c| !c.passed) {
+    let (checks, solid) = build.validated();
+    if let Some(c) = checks.iter().find(|c| !c.passed) {
         bail!(
             "check `{}` failed: measured {} {} against limit {} ({}); nothing was written",
             c.name,
@@ -90,8 +102,8 @@ pub fn run_device(spec: &Spec, out: &Path, progress: &dyn Progress) -> Result<Ve
         );
     }
     progress.stage("writing", 1);
-    let stl = stl_bytes("device.stl", &build.mesh.mesh)?;
-    let report = report::device_report(spec, &build, stl.len());
+    let stl = stl_bytes("device.stl", solid.expect("the solid checks passed"))?;
+    let report = report::device_report(spec, &build, &checks, stl.len());
     let mut files = OutputSet::new();
     files.add("device.stl", stl);
     files.add(

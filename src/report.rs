@@ -181,7 +181,12 @@ pub fn design_echo(spec: &Spec) -> DesignEcho {
     }
 }
 
-pub fn device_report(spec: &Spec, build: &DeviceBuild, stl_bytes: usize) -> DeviceReport {
+pub fn device_report(
+    spec: &Spec,
+    build: &DeviceBuild,
+    checks: &[CheckResult],
+    stl_bytes: usize,
+) -> DeviceReport {
     let d = &spec.design;
     let s = &d.standard;
     let st = &build.mesh.stats;
@@ -237,6 +242,6 @@ pub fn device_report(spec: &Spec, build: &DeviceBuild, stl_bytes: usize) -> Devi
             min: shift.min / t,
             max: shift.max / t,
         },
-        checks: build.checks.iter().map(CheckReport::from).collect(),
+        checks: checks.iter().map(CheckReport::from).collect(),
     }
 }

@@ -5,8 +5,7 @@
 //! directory and is renamed into place, so a failed run leaves no partial
 //! file behind and readers never see half a file.
 
-use moirecast_kernel::check::solid_checks;
-use moirecast_kernel::Mesh;
+use moirecast_kernel::check::SolidMesh;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -27,16 +26,29 @@ pub enum ExportError {
     },
 }
 
-/// Encodes `mesh` as binary STL (f32 coordinates, outward facet normals),
-/// after checking it is a valid solid.
-pub fn stl_bytes(file: &str, mesh: &Mesh) -> Result<Vec<u8>, ExportError> {
-    if let Some(c) = solid_checks(mesh).into_iter().find(|c| !c.passed) {
-        return Err(ExportError::InvalidMesh {
+/// Validates `mesh` as a solid (METHOD §7.1), or says which check failed.
+pub fn validate<'a>(
+    file: &str,
+    mesh: &'a moirecast_kernel::Mesh,
+) -> Result<SolidMesh<'a>, ExportError> {
+    let (checks, solid) = SolidMesh::validate(mesh);
+    solid.ok_or_else(|| {
+        let c = checks
+            .into_iter()
+            .find(|c| !c.passed)
+            .expect("a failed check");
+        ExportError::InvalidMesh {
             file: file.to_owned(),
             check: c.name,
             detail: format!("{} {} vs limit {}; {}", c.value, c.unit, c.limit, c.detail),
-        });
-    }
+        }
+    })
+}
+
+/// Encodes a validated solid as binary STL (f32 coordinates, outward facet
+/// normals). Taking a [`SolidMesh`] means an unchecked mesh cannot be written.
+pub fn stl_bytes(file: &str, solid: SolidMesh) -> Result<Vec<u8>, ExportError> {
+    let mesh = solid.mesh();
     let triangles = mesh.triangles.iter().map(|t| {
         let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
         let n = (b - a).cross(c - a).normalize_or_zero();
@@ -118,6 +130,7 @@ impl OutputSet {
 mod tests {
     use super::*;
     use glam::DVec3;
+    use moirecast_kernel::Mesh;
 
     #[test]
     fn stl_round_trips_through_stl_io() {
@@ -125,7 +138,7 @@ mod tests {
             positions: vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z],
             triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
         };
-        let bytes = stl_bytes("t.stl", &m).unwrap();
+        let bytes = stl_bytes("t.stl", validate("t.stl", &m).unwrap()).unwrap();
         assert_eq!(bytes.len(), 84 + 4 * 50);
         let back = stl_io::read_stl(&mut std::io::Cursor::new(bytes)).unwrap();
         assert_eq!(back.faces.len(), 4);
@@ -139,7 +152,7 @@ mod tests {
             triangles: vec![[0, 1, 2]],
         };
         assert!(matches!(
-            stl_bytes("open.stl", &m),
+            validate("open.stl", &m),
             Err(ExportError::InvalidMesh {
                 check: "closed-oriented",
                 ..

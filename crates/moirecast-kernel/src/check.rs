@@ -72,29 +72,49 @@ pub fn solid_checks(mesh: &Mesh) -> Vec<CheckResult> {
         format!("{} vertices", mesh.positions.len()),
     ));
 
-    // Closed and oriented: every directed edge appears once, and so does its reverse.
-    let mut edges: Vec<u64> = mesh
-        .triangles
-        .par_iter()
-        .flat_map_iter(|t| (0..3).map(move |e| ((t[e] as u64) << 32) | t[(e + 1) % 3] as u64))
-        .collect();
-    edges.par_sort_unstable();
-    let duplicated = edges.windows(2).filter(|w| w[0] == w[1]).count();
-    let unmatched = edges
-        .par_iter()
-        .filter(|&&e| edges.binary_search(&((e << 32) | (e >> 32))).is_err())
-        .count();
+    // Closed and oriented: every directed edge a→b appears exactly once, and
+    // so does b→a. Outgoing edges per vertex in CSR form make this O(E).
+    let nv = mesh.positions.len();
+    let mut start = vec![0u32; nv + 1];
+    for t in &mesh.triangles {
+        for &a in t {
+            start[a as usize + 1] += 1;
+        }
+    }
+    for v in 0..nv {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut out_edges = vec![0u32; 3 * mesh.triangles.len()];
+    for t in &mesh.triangles {
+        for e in 0..3 {
+            let a = t[e] as usize;
+            out_edges[fill[a] as usize] = t[(e + 1) % 3];
+            fill[a] += 1;
+        }
+    }
+    let out_of = |a: u32| &out_edges[start[a as usize] as usize..start[a as usize + 1] as usize];
+    let bad: usize = (0..nv as u32)
+        .into_par_iter()
+        .map(|a| {
+            out_of(a)
+                .iter()
+                .filter(|&&b| {
+                    out_of(a).iter().filter(|&&x| x == b).count() != 1
+                        || out_of(b).iter().filter(|&&x| x == a).count() != 1
+                })
+                .count()
+        })
+        .sum();
+    let directed = out_edges.len();
+    let undirected = directed / 2;
     out.push(CheckResult::at_most(
         "closed-oriented",
-        (duplicated + unmatched) as f64,
+        bad as f64,
         0.0,
         "edges",
-        format!(
-            "{} directed edges; {duplicated} repeated, {unmatched} without an opposite",
-            edges.len()
-        ),
+        format!("{directed} directed edges; {bad} not matched by exactly one opposite edge"),
     ));
-
     // One shell, genus 0: connected, and V − E + F = 2.
     let mut parent: Vec<u32> = (0..mesh.positions.len() as u32).collect();
     fn find(p: &mut [u32], mut x: u32) -> u32 {
@@ -122,7 +142,7 @@ pub fn solid_checks(mesh: &Mesh) -> Vec<CheckResult> {
     let shells = (0..mesh.positions.len() as u32)
         .filter(|&v| used[v as usize] && find(&mut parent, v) == v)
         .count();
-    let euler = vertices as i64 - (edges.len() / 2) as i64 + mesh.triangles.len() as i64;
+    let euler = vertices as i64 - undirected as i64 + mesh.triangles.len() as i64;
     out.push(CheckResult::at_most(
         "one-shell",
         shells as f64,
@@ -193,6 +213,27 @@ pub fn solid_checks(mesh: &Mesh) -> Vec<CheckResult> {
         ),
     ));
     out
+}
+
+/// A mesh that passed every solid check. Only [`SolidMesh::validate`] makes
+/// one, so a writer that takes it cannot write an unchecked mesh, and no
+/// mesh is checked twice.
+#[derive(Clone, Copy, Debug)]
+pub struct SolidMesh<'a> {
+    mesh: &'a Mesh,
+}
+
+impl<'a> SolidMesh<'a> {
+    /// Runs [`solid_checks`]; the mesh is solid only if all passed.
+    pub fn validate(mesh: &'a Mesh) -> (Vec<CheckResult>, Option<SolidMesh<'a>>) {
+        let checks = solid_checks(mesh);
+        let ok = checks.iter().all(|c| c.passed);
+        (checks, ok.then_some(SolidMesh { mesh }))
+    }
+
+    pub fn mesh(&self) -> &'a Mesh {
+        self.mesh
+    }
 }
 
 #[cfg(test)]

@@ -25,8 +25,8 @@ use crate::lens::LensArc;
 use crate::mesh::Mesh;
 use crate::model::LensRef;
 use crate::progress::Progress;
-use crate::solve::{bracketed_secant, chord_1d, newton_1d, newton_2d};
-use crate::tolerance::WALL_SNAP_MM;
+use crate::solve::{bracketed_secant, newton_2d};
+use crate::tolerance::{SOLVE_RESIDUAL_MM, WALL_SNAP_MM};
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -407,10 +407,14 @@ impl<'a> Planner<'a> {
         let surveys: Vec<(i64, LensSurvey)> = (k0..k1)
             .into_par_iter()
             .map(|k| {
-                let arcs = stations
-                    .iter()
-                    .map(|&v| d.base_arc(k, v))
-                    .collect::<Result<Vec<_>>>()?;
+                // consecutive stations: each crease solve starts from the last
+                let mut near = (None, None);
+                let mut arcs = Vec::with_capacity(stations.len());
+                for &v in &stations {
+                    let (arc, u0, u1) = d.base_arc_and_creases(k, v, near)?;
+                    near = (Some(u0), Some(u1));
+                    arcs.push(arc);
+                }
                 Ok((k, self.survey_lens(&arcs, h)))
             })
             .collect::<Result<_>>()?;
@@ -709,63 +713,71 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
     let key_t =
         |o: &VertexOrigin, lens: LensRef| o.params_on(lens).map(|p| p.x).unwrap_or(f64::NAN);
 
-    // revealer strips
-    for r in 0..last_row {
-        for i in 0..n {
-            let a: Vec<u32> = (0..=rev_columns[i])
-                .map(|j| dm.revealer_vertex(r, i, j))
-                .collect();
-            let b: Vec<u32> = (0..=rev_columns[i])
-                .map(|j| dm.revealer_vertex(r + 1, i, j))
-                .collect();
-            let lens = LensRef::Revealer(i as i64);
-            let origins = &dm.origins;
-            zip(
-                &a,
-                &b,
-                &|v| key_t(&origins[v as usize], lens),
-                false,
-                Patch::Lens(lens),
-                &mut tris,
-                &mut patches,
-            );
+    // revealer strips: per row in parallel, concatenated in row order
+    type Strip = (Vec<[u32; 3]>, Vec<Patch>);
+    let concat = |parts: Vec<Strip>, tris: &mut Vec<[u32; 3]>, patches: &mut Vec<Patch>| {
+        for (t, p) in parts {
+            tris.extend(t);
+            patches.extend(p);
         }
-    }
+    };
+    let dm_ref = &dm;
+    let revealer_parts: Vec<Strip> = (0..last_row)
+        .into_par_iter()
+        .map(|r| {
+            let (mut t, mut p) = (Vec::new(), Vec::new());
+            for i in 0..n {
+                let a: Vec<u32> = (0..=rev_columns[i])
+                    .map(|j| dm_ref.revealer_vertex(r, i, j))
+                    .collect();
+                let b: Vec<u32> = (0..=rev_columns[i])
+                    .map(|j| dm_ref.revealer_vertex(r + 1, i, j))
+                    .collect();
+                let lens = LensRef::Revealer(i as i64);
+                zip(
+                    &a,
+                    &b,
+                    &|v| key_t(&dm_ref.origins[v as usize], lens),
+                    false,
+                    Patch::Lens(lens),
+                    &mut t,
+                    &mut p,
+                );
+            }
+            (t, p)
+        })
+        .collect();
+    concat(revealer_parts, &mut tris, &mut patches);
     let revealer_triangles = tris.len();
 
-    // base strips
-    for r in 0..base_row_data.len() - 1 {
-        let (ra, rb) = (&base_row_data[r], &base_row_data[r + 1]);
-        let (oa, ob) = (base_offsets[r], base_offsets[r + 1]);
-        let lenses: std::collections::BTreeSet<i64> =
-            ra.lenses.keys().chain(rb.lenses.keys()).cloned().collect();
-        for k in lenses {
-            let (pa, pb) = (ra.lenses.get(&k), rb.lenses.get(&k));
-            let (a, b) = match (pa, pb) {
-                (Some(a), Some(b)) if a.len() > 1 || b.len() > 1 => (a, b),
-                (Some(a), None) | (None, Some(a)) if a.len() > 1 => {
-                    return Err(KernelError::MeshCheck {
-                        name: "base-crossings",
-                        detail: format!("base lens {k} enters the outline between y = {} and {} without a crease crossing being found", base_rows[r], base_rows[r + 1]),
-                    })
-                }
-                _ => continue,
-            };
-            let a: Vec<u32> = a.iter().map(|i| i + oa).collect();
-            let b: Vec<u32> = b.iter().map(|i| i + ob).collect();
-            let lens = LensRef::Base(k);
-            let origins = &dm.origins;
-            zip(
-                &a,
-                &b,
-                &|v| key_t(&origins[v as usize], lens),
-                true,
-                Patch::Lens(lens),
-                &mut tris,
-                &mut patches,
-            );
-        }
-    }
+    // base strips: per row pair in parallel
+    let base_parts: Vec<Strip> = (0..base_row_data.len() - 1)
+        .into_par_iter()
+        .map(|r| {
+            let (ra, rb) = (&base_row_data[r], &base_row_data[r + 1]);
+            let (oa, ob) = (base_offsets[r], base_offsets[r + 1]);
+            let (mut t, mut p) = (Vec::new(), Vec::new());
+            let lenses: std::collections::BTreeSet<i64> = ra.lenses.keys().chain(rb.lenses.keys()).cloned().collect();
+            for k in lenses {
+                let (a, b) = match (ra.lenses.get(&k), rb.lenses.get(&k)) {
+                    (Some(a), Some(b)) if a.len() > 1 || b.len() > 1 => (a, b),
+                    (Some(a), None) | (None, Some(a)) if a.len() > 1 => {
+                        return Err(KernelError::MeshCheck {
+                            name: "base-crossings",
+                            detail: format!("base lens {k} enters the outline between y = {} and {} without a crease crossing being found", base_rows[r], base_rows[r + 1]),
+                        })
+                    }
+                    _ => continue,
+                };
+                let a: Vec<u32> = a.iter().map(|i| i + oa).collect();
+                let b: Vec<u32> = b.iter().map(|i| i + ob).collect();
+                let lens = LensRef::Base(k);
+                zip(&a, &b, &|v| key_t(&dm_ref.origins[v as usize], lens), true, Patch::Lens(lens), &mut t, &mut p);
+            }
+            Ok((t, p))
+        })
+        .collect::<Result<_>>()?;
+    concat(base_parts, &mut tris, &mut patches);
     let base_triangles = tris.len() - revealer_triangles;
 
     // walls
@@ -880,17 +892,42 @@ fn base_row(
     xr: f64,
 ) -> Result<BaseRow> {
     let (k0, k1) = d.base_creases;
-    // crease vertices (k0..=k1), solved to lie at height y
+    // crease vertices (k0..=k1), solved to lie at height y; neighbouring
+    // creases have nearly the same station, so each starts from the last,
+    // with its layout u predicted from the last solve
     let mut creases: Vec<(f64, DVec3)> = Vec::with_capacity((k1 - k0 + 1) as usize);
     let mut v_guess = y;
+    let mut slope = None;
     for k in k0..=k1 {
-        let v = newton_1d(v_guess, &|| format!("base crease {k} at y = {y}"), |v| {
-            d.base_crease_point(k, v)
-                .map(|p| p.y - y)
-                .unwrap_or(f64::NAN)
-        })?;
+        let mut u_near = None;
+        let point = |v: f64, near: Option<f64>| -> Result<(DVec3, f64)> {
+            let u = d.base_crease_u_near(k, v, near)?;
+            Ok((d.base_surface(u, v), u))
+        };
+        let mut v = v_guess;
+        let mut found = None;
+        for _ in 0..40 {
+            let (p, u) = point(v, u_near)?;
+            u_near = Some(u);
+            let r = p.y - y;
+            if r.abs() <= SOLVE_RESIDUAL_MM {
+                found = Some(p);
+                break;
+            }
+            let dydv = match slope {
+                Some(s) => s,
+                None => {
+                    let h = 1e-6;
+                    let s = (point(v + h, u_near)?.0.y - point(v - h, u_near)?.0.y) / (2.0 * h);
+                    slope = Some(s);
+                    s
+                }
+            };
+            v -= r / dydv;
+        }
+        let p = found.ok_or_else(|| KernelError::Solver(format!("base crease {k} at y = {y}")))?;
         v_guess = v;
-        creases.push((v, d.base_crease_point(k, v)?));
+        creases.push((v, p));
     }
     let crease = |k: i64| creases[(k - k0) as usize];
     let mut row = BaseRow {
@@ -967,36 +1004,46 @@ fn base_row(
         // Columns closer than this to a cut are dropped (no slivers); the span
         // next to a cut is then at most 1.1 columns.
         let margin = 0.1 / cols as f64;
-        // Interior vertices: the station v at which (t, v) has height y
-        // varies smoothly from crease to crease, so start from the linear
-        // blend with the creases' dy/dv, and warm-start the crease solves.
-        let near = (
-            Some(d.base_crease_u(k, c0.0)?),
-            Some(d.base_crease_u(k + 1, c1.0)?),
-        );
-        let slope = {
-            let h = 1e-6;
-            let y = |v: f64| d.base_crease_point(k, v).map(|p| p.y).unwrap_or(f64::NAN);
-            (y(c0.0 + h) - y(c0.0 - h)) / (2.0 * h)
-        };
-        for j in 1..cols {
-            let t = j as f64 / cols as f64;
-            if t <= t_lo + margin || t >= t_hi - margin {
-                continue;
+        // Interior vertices: solve the station v at which (t, v) has height y.
+        // Three exact arcs around the middle station give, per column, a
+        // quadratic model of y(v) that starts Newton within ~1e-8 mm, and a
+        // linear predictor of the crease positions that warm-starts every
+        // crease solve; then exact Newton steps to the solver residual.
+        if poly.len() == 1 || t_hi - t_lo > 2.0 * margin {
+            let vm = 0.5 * (c0.0 + c1.0);
+            let hq = 0.05f64.min(d.params.period);
+            let (am, u0m, u1m) = d.base_arc_and_creases(k, vm, (None, None))?;
+            let (ap, u0p, u1p) = d.base_arc_and_creases(k, vm + hq, (Some(u0m), Some(u1m)))?;
+            let (an, u0n, u1n) = d.base_arc_and_creases(k, vm - hq, (Some(u0m), Some(u1m)))?;
+            let (du0, du1) = ((u0p - u0n) / (2.0 * hq), (u1p - u1n) / (2.0 * hq));
+            let predict = |v: f64| (Some(u0m + du0 * (v - vm)), Some(u1m + du1 * (v - vm)));
+            for j in 1..cols {
+                let t = j as f64 / cols as f64;
+                if t <= t_lo + margin || t >= t_hi - margin {
+                    continue;
+                }
+                let (yn, y0, yp) = (an.point(t).y, am.point(t).y, ap.point(t).y);
+                let (jm, km) = ((yp - yn) / (2.0 * hq), (yp - 2.0 * y0 + yn) / (hq * hq));
+                let mut dv = (y - y0) / jm;
+                for _ in 0..3 {
+                    dv -= (y0 + jm * dv + 0.5 * km * dv * dv - y) / (jm + km * dv);
+                }
+                let mut v = vm + dv;
+                let mut found = None;
+                for _ in 0..12 {
+                    let p = d.base_arc_near(k, v, predict(v))?.point(t);
+                    let r = p.y - y;
+                    if r.abs() <= SOLVE_RESIDUAL_MM {
+                        found = Some(p);
+                        break;
+                    }
+                    v -= r / (jm + km * (v - vm));
+                }
+                let p = found.ok_or_else(|| {
+                    KernelError::Solver(format!("base lens {k} at t = {t}, y = {y}"))
+                })?;
+                poly.push(push(&mut row, p, VertexOrigin::BaseLens { k, t, v }));
             }
-            let v0 = c0.0 + (c1.0 - c0.0) * t;
-            let point = |v: f64| d.base_arc_near(k, v, near).map(|a| a.point(t));
-            let v = chord_1d(
-                v0,
-                Some(slope),
-                &|| format!("base lens {k} at t = {t}, y = {y}"),
-                |v| point(v).map(|p| p.y - y).unwrap_or(f64::NAN),
-            )?;
-            poly.push(push(
-                &mut row,
-                point(v)?,
-                VertexOrigin::BaseLens { k, t, v },
-            ));
         }
         match right_cut {
             None => poly.push(crease_vertex(&mut row, k + 1)),

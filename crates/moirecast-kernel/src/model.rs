@@ -146,13 +146,23 @@ impl Design {
         v: f64,
         near: (Option<f64>, Option<f64>),
     ) -> Result<LensArc> {
+        Ok(self.base_arc_and_creases(k, v, near)?.0)
+    }
+
+    /// The base arc and the layout u of its two creases.
+    pub fn base_arc_and_creases(
+        &self,
+        k: i64,
+        v: f64,
+        near: (Option<f64>, Option<f64>),
+    ) -> Result<(LensArc, f64, f64)> {
         let (u0, u1) = (
             self.base_crease_u_near(k, v, near.0)?,
             self.base_crease_u_near(k + 1, v, near.1)?,
         );
         let (p0, p1) = (self.base_surface(u0, v), self.base_surface(u1, v));
         let toward = -self.base_normal(0.5 * (u0 + u1), v);
-        Ok(LensArc::new(p0, p1, toward, self.base_rule))
+        Ok((LensArc::new(p0, p1, toward, self.base_rule), u0, u1))
     }
 
     /// A point of base lens k: parameter t ∈ [0, 1] across, station v along.

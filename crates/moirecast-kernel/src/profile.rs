@@ -231,53 +231,89 @@ impl SampledProfile {
     pub fn eval(&self, x: f64, y: f64) -> (f64, DVec2) {
         let fx = ((x - self.origin.x) / self.spacing).clamp(0.0, (self.nx - 1) as f64);
         let fy = ((y - self.origin.y) / self.spacing).clamp(0.0, (self.ny - 1) as f64);
+        // fx, fy ≥ 0, so truncation is floor (and avoids a libm call)
         let (i, j) = (
-            fx.floor().min((self.nx - 2) as f64),
-            fy.floor().min((self.ny - 2) as f64),
+            (fx as usize).min(self.nx - 2) as f64,
+            (fy as usize).min(self.ny - 2) as f64,
         );
         let (wx, dx) = catmull_rom(fx - i);
         let (wy, dy) = catmull_rom(fy - j);
-        let (i, j) = (i as isize, j as isize);
+        let (i, j) = (i as usize, j as usize);
         let (mut e, mut ex, mut ey) = (0.0, 0.0, 0.0);
-        for b in 0..4 {
-            let (mut row, mut row_d) = (0.0, 0.0);
-            for a in 0..4 {
-                let v = self.at(i - 1 + a as isize, j - 1 + b as isize);
-                row += wx[a] * v;
-                row_d += dx[a] * v;
+        if i >= 1 && j >= 1 && i + 2 < self.nx && j + 2 < self.ny {
+            // interior: the 4 × 4 stencil needs no clamping
+            for b in 0..4 {
+                let row = &self.values[(j - 1 + b) * self.nx + i - 1..][..4];
+                let (mut r, mut rd) = (0.0, 0.0);
+                for a in 0..4 {
+                    r += wx[a] * row[a];
+                    rd += dx[a] * row[a];
+                }
+                e += wy[b] * r;
+                ex += wy[b] * rd;
+                ey += dy[b] * r;
             }
-            e += wy[b] * row;
-            ex += wy[b] * row_d;
-            ey += dy[b] * row;
+        } else {
+            for b in 0..4 {
+                let (mut r, mut rd) = (0.0, 0.0);
+                for a in 0..4 {
+                    let v = self.at(i as isize - 1 + a as isize, j as isize - 1 + b as isize);
+                    r += wx[a] * v;
+                    rd += dx[a] * v;
+                }
+                e += wy[b] * r;
+                ex += wy[b] * rd;
+                ey += dy[b] * r;
+            }
         }
         (e, DVec2::new(ex, ey) / self.spacing)
     }
 
     fn max_slope_x(&self, half_w: f64, half_h: f64) -> (f64, DVec2) {
         use rayon::prelude::*;
-        // Catmull-Rom derivatives are piecewise quadratic in x: sampling at
-        // nodes and half-cells finds the maximum to within a few per cent of
-        // a blurred profile; the steepness rule keeps a 10 % margin.
-        let step = self.spacing / 2.0;
-        let (n_x, n_y) = (
-            (2.0 * half_w / step).ceil() as usize,
-            (2.0 * half_h / step).ceil() as usize,
-        );
-        (0..=n_y)
+        // On a grid row the interpolant is a 1-D Catmull-Rom spline in x, whose
+        // derivative is piecewise quadratic: sampling at nodes and half-cells
+        // finds its maximum to within a few per cent for a blurred profile;
+        // the steepness rule keeps a 10 % margin.
+        let col = |x: f64| ((x - self.origin.x) / self.spacing).clamp(0.0, (self.nx - 1) as f64);
+        let row = |y: f64| ((y - self.origin.y) / self.spacing).clamp(0.0, (self.ny - 1) as f64);
+        let (i0, i1) = (col(-half_w).floor() as usize, col(half_w).ceil() as usize);
+        let (j0, j1) = (row(-half_h).floor() as usize, row(half_h).ceil() as usize);
+        let (_, d_half) = catmull_rom(0.5);
+        (j0..=j1)
             .into_par_iter()
-            .map(|b| {
-                let y = -half_h + (b as f64 * step).min(2.0 * half_h);
+            .map(|j| {
                 let mut best = (0.0, DVec2::ZERO);
-                for a in 0..=n_x {
-                    let x = -half_w + (a as f64 * step).min(2.0 * half_w);
-                    let g = self.eval(x, y).1.x.abs();
-                    if g > best.0 {
-                        best = (g, DVec2::new(x, y));
+                let y = self.origin.y + j as f64 * self.spacing;
+                for i in i0..i1.min(self.nx - 1) {
+                    let v = |a: isize| self.at(i as isize + a, j as isize);
+                    let at_node = (v(1) - v(-1)) / (2.0 * self.spacing);
+                    let at_half = (d_half[0] * v(-1)
+                        + d_half[1] * v(0)
+                        + d_half[2] * v(1)
+                        + d_half[3] * v(2))
+                        / self.spacing;
+                    for (g, off) in [(at_node.abs(), 0.0), (at_half.abs(), 0.5)] {
+                        if g > best.0 {
+                            best = (
+                                g,
+                                DVec2::new(self.origin.x + (i as f64 + off) * self.spacing, y),
+                            );
+                        }
                     }
                 }
                 best
             })
-            .reduce(|| (0.0, DVec2::ZERO), |a, b| if b.0 > a.0 { b } else { a })
+            .reduce(
+                || (0.0, DVec2::ZERO),
+                |a, b| {
+                    if b.0 > a.0 || (b.0 == a.0 && (b.1.y, b.1.x) < (a.1.y, a.1.x)) {
+                        b
+                    } else {
+                        a
+                    }
+                },
+            )
     }
 }
 
