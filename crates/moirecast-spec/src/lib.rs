@@ -650,3 +650,95 @@ fn read_raster(file: &str, name: &str, images: &ImageSource) -> Result<Raster, S
         luminance,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse_str(text: &str) -> Result<Spec, SpecError> {
+        parse(text, "test.toml", ImageSource::Embedded)
+    }
+
+    #[test]
+    fn an_empty_spec_uses_the_written_defaults() {
+        let s = parse_str("").unwrap();
+        let p = &s.design.params;
+        assert!(matches!(p.surface, PitchSurface::Saddle { radius } if radius == 60.0));
+        assert_eq!((p.width, p.height, p.period), (60.0, 60.0, 0.5));
+        assert!((p.lens.afov.to_degrees() - 60.0).abs() < 1e-12);
+        assert_eq!(p.lens.index, 1.41);
+        assert_eq!(p.base.d, None, "d defaults to the focal depth");
+        assert_eq!(p.base.levels, 1.0);
+        assert!(matches!(p.profile, Profile::Rings { wavelength } if wavelength == 15.0));
+        assert_eq!(s.design.tolerance.mm(), 0.002);
+    }
+
+    #[test]
+    fn the_default_design_is_the_reference_with_its_image() {
+        let s = default_spec().unwrap();
+        assert_eq!(s.design.lenses, 120);
+        assert!(matches!(s.design.params.profile, Profile::Sampled(_)));
+        assert!(s.profile_source.contains("horse"));
+    }
+
+    #[test]
+    fn materials_set_the_index() {
+        let s = parse_str("[lens]\nmaterial = \"polycarbonate\"").unwrap();
+        assert_eq!(s.design.params.lens.index, 1.585);
+        // an explicit index wins over the material
+        let s = parse_str("[lens]\nmaterial = \"pmma\"\nindex = 1.6").unwrap();
+        assert_eq!(s.design.params.lens.index, 1.6);
+    }
+
+    #[test]
+    fn d_is_a_distance_or_focal() {
+        let s = parse_str("[base]\nd = 1.2").unwrap();
+        assert_eq!(s.design.d, 1.2);
+        let e = parse_str("[base]\nd = \"deep\"").unwrap_err().to_string();
+        assert!(e.contains("base.d") && e.contains("\"focal\""), "{e}");
+    }
+
+    #[test]
+    fn every_kernel_parameter_has_a_key() {
+        use Param::*;
+        let all = [
+            SurfaceRadius,
+            SurfaceFormula,
+            Width,
+            Height,
+            Period,
+            Afov,
+            Index,
+            BaseAfov,
+            BaseA,
+            BaseD,
+            Levels,
+            Blur,
+            Tolerance,
+            ProfileImage,
+            ProfileWavelength,
+            ProfileSigma,
+        ];
+        let keys: std::collections::BTreeSet<&str> = all.iter().map(|p| key_of(*p)).collect();
+        assert_eq!(keys.len(), all.len(), "keys are distinct");
+        assert!(keys.iter().all(|k| k.contains('.')), "keys are table.key");
+    }
+
+    #[test]
+    fn printed_bases_are_refused_until_they_exist() {
+        let e = parse_str("[base]\nkind = \"printed\"")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("base.kind"), "{e}");
+    }
+
+    #[test]
+    fn a_formula_surface_parses() {
+        let s = parse_str("[surface]\nkind = \"formula\"\nz = \"(x*x - y*y)/120\"").unwrap();
+        assert!(matches!(s.design.params.surface, PitchSurface::Formula(_)));
+        let e = parse_str("[surface]\nkind = \"saddle\"\nz = \"x\"")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("surface.z"), "{e}");
+    }
+}
