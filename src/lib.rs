@@ -69,6 +69,8 @@ pub fn build_device(design: &Design, progress: &dyn Progress) -> Result<DeviceBu
     checks.push(measure::walls_on_outline(design, &mesh));
     checks.push(measure::creases_shared(design, &mesh));
     checks.push(measure::base_creases_follow_shift(design, &mesh));
+    checks.push(measure::surfaces_are_graphs(&mesh));
+    checks.push(measure::min_thickness(design, &mesh, v_stride));
     let lens_stats = measure::revealer_lens_stats(design, &mesh);
     checks.extend(afov_check(design, &lens_stats));
     checks.push(CheckResult::at_most(

@@ -24,6 +24,28 @@ pub enum Param {
     ProfileSigma,
 }
 
+impl Param {
+    /// Every parameter, for exhaustive mappings and their tests.
+    pub const ALL: [Param; 16] = [
+        Param::SurfaceRadius,
+        Param::SurfaceFormula,
+        Param::Width,
+        Param::Height,
+        Param::Period,
+        Param::Afov,
+        Param::Index,
+        Param::BaseAfov,
+        Param::BaseA,
+        Param::BaseD,
+        Param::Levels,
+        Param::Blur,
+        Param::Tolerance,
+        Param::ProfileImage,
+        Param::ProfileWavelength,
+        Param::ProfileSigma,
+    ];
+}
+
 /// A design that cannot be built, with everything a user needs to fix it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DesignError {

@@ -414,3 +414,101 @@ pub fn shift_range(design: &Design) -> Range {
     }
     r
 }
+
+/// No self-intersection, part 1 (METHOD §7.1): both lens surfaces are graphs
+/// over xy. Every revealer triangle must face up and every base triangle
+/// down in projection; with the consistent orientation and the outline
+/// boundary, a surface whose triangles all project positively cannot fold
+/// over itself. Counts the triangles that do not.
+pub fn surfaces_are_graphs(dm: &DeviceMesh) -> CheckResult {
+    let (bad, worst) = dm
+        .mesh
+        .triangles
+        .par_iter()
+        .zip(&dm.patches)
+        .enumerate()
+        .filter_map(|(i, (t, patch))| {
+            let sign = match patch {
+                Patch::Lens(LensRef::Revealer(_)) => 1.0,
+                Patch::Lens(LensRef::Base(_)) => -1.0,
+                Patch::Wall(_) => return None,
+            };
+            let [a, b, c] = t.map(|v| dm.mesh.positions[v as usize]);
+            let projected = (b - a).truncate().perp_dot((c - a).truncate()) * sign;
+            (projected <= 0.0).then_some(i)
+        })
+        .fold(|| (0usize, usize::MAX), |(n, w), i| (n + 1, w.min(i)))
+        .reduce(|| (0, usize::MAX), |a, b| (a.0 + b.0, a.1.min(b.1)));
+    let at = dm
+        .mesh
+        .triangles
+        .get(worst)
+        .map(|t| dm.mesh.positions[t[0] as usize])
+        .unwrap_or_default();
+    CheckResult::at_most(
+        "surfaces-are-graphs",
+        bad as f64,
+        0.0,
+        "triangles",
+        if bad == 0 {
+            "every lens triangle projects with the orientation of its surface".into()
+        } else {
+            format!("first fold-over near ({:.3}, {:.3})", at.x, at.y)
+        },
+    )
+}
+
+/// No self-intersection, part 2: the revealer lies above the base. At every
+/// `stride`-th base vertex, the exact revealer height at the same x, y is
+/// solved afresh; reports the smallest thickness (mm), which must be positive.
+pub fn min_thickness(design: &Design, dm: &DeviceMesh, stride: usize) -> CheckResult {
+    let crease_x: Vec<f64> = (0..=design.lenses as i64)
+        .map(|i| design.crease_point(i, 0.0).x)
+        .collect();
+    let (thin, at) = (0..dm.mesh.positions.len())
+        .into_par_iter()
+        .step_by(stride.max(1))
+        .filter(|&v| {
+            matches!(
+                dm.origins[v],
+                VertexOrigin::BaseCrease { .. } | VertexOrigin::BaseLens { .. }
+            )
+        })
+        .map(|v| {
+            let p = dm.mesh.positions[v];
+            let i = (crease_x.partition_point(|&x| x <= p.x).saturating_sub(1))
+                .min(design.lenses - 1) as i64;
+            let t0 = ((p.x - crease_x[i as usize])
+                / (crease_x[i as usize + 1] - crease_x[i as usize]))
+                .clamp(0.0, 1.0);
+            let top = newton_2d(DVec2::new(t0, p.y), &String::new, |q| {
+                let s = design.revealer_point(i, q.x, q.y);
+                DVec2::new(s.x - p.x, s.y - p.y)
+            })
+            .map(|q| design.revealer_point(i, q.x, q.y).z)
+            .unwrap_or(f64::NEG_INFINITY);
+            (top - p.z, p)
+        })
+        .reduce(
+            || (f64::INFINITY, DVec3::ZERO),
+            |a, b| {
+                if b.0 < a.0 || (b.0 == a.0 && (b.1.x, b.1.y) < (a.1.x, a.1.y)) {
+                    b
+                } else {
+                    a
+                }
+            },
+        );
+    CheckResult::at_least(
+        "min-thickness",
+        thin,
+        design.tolerance.mm(),
+        "mm",
+        format!(
+            "revealer above base at every {}th base vertex; thinnest at ({:.3}, {:.3})",
+            stride.max(1),
+            at.x,
+            at.y
+        ),
+    )
+}

@@ -42,6 +42,8 @@ fn assert_device_invariants(d: &Design, dm: &DeviceMesh) {
         measure::walls_on_outline(d, dm),
         measure::creases_shared(d, dm),
         measure::base_creases_follow_shift(d, dm),
+        measure::surfaces_are_graphs(dm),
+        measure::min_thickness(d, dm, 1),
     ];
     for c in checks {
         assert!(c.passed, "{c:?}");
@@ -152,6 +154,36 @@ fn meshes_are_deterministic() {
     let a = mesh_device(&d, &Silent).unwrap();
     let b = mesh_device(&d, &Silent).unwrap();
     assert_eq!(a.mesh, b.mesh);
+}
+
+#[test]
+fn the_self_intersection_checks_catch_folds_and_crossings() {
+    let mut p = params(PitchSurface::Saddle { radius: 40.0 }, 8, 2.0, 0.5);
+    p.base.levels = 1.0;
+    p.profile = Profile::Rings { wavelength: 4.0 };
+    let d = Design::new(p).unwrap();
+    let dm = mesh_device(&d, &Silent).unwrap();
+    assert!(measure::surfaces_are_graphs(&dm).passed && measure::min_thickness(&d, &dm, 1).passed);
+    // fold one revealer triangle over
+    let mut folded = dm.clone();
+    let t = folded
+        .patches
+        .iter()
+        .position(|p| matches!(p, mesher::Patch::Lens(model::LensRef::Revealer(_))))
+        .unwrap();
+    folded.mesh.triangles[t].swap(1, 2);
+    let c = measure::surfaces_are_graphs(&folded);
+    assert!(!c.passed && c.value == 1.0, "{c:?}");
+    // push one base vertex up through the revealer
+    let mut crossed = dm.clone();
+    let v = crossed
+        .origins
+        .iter()
+        .position(|o| matches!(o, mesher::VertexOrigin::BaseLens { .. }))
+        .unwrap();
+    crossed.mesh.positions[v].z += 10.0;
+    let c = measure::min_thickness(&d, &crossed, 1);
+    assert!(!c.passed && c.value < 0.0, "{c:?}");
 }
 
 fn surface_strategy() -> impl Strategy<Value = PitchSurface> {

@@ -700,27 +700,9 @@ mod tests {
 
     #[test]
     fn every_kernel_parameter_has_a_key() {
-        use Param::*;
-        let all = [
-            SurfaceRadius,
-            SurfaceFormula,
-            Width,
-            Height,
-            Period,
-            Afov,
-            Index,
-            BaseAfov,
-            BaseA,
-            BaseD,
-            Levels,
-            Blur,
-            Tolerance,
-            ProfileImage,
-            ProfileWavelength,
-            ProfileSigma,
-        ];
-        let keys: std::collections::BTreeSet<&str> = all.iter().map(|p| key_of(*p)).collect();
-        assert_eq!(keys.len(), all.len(), "keys are distinct");
+        let keys: std::collections::BTreeSet<&str> =
+            Param::ALL.iter().map(|p| key_of(*p)).collect();
+        assert_eq!(keys.len(), Param::ALL.len(), "keys are distinct");
         assert!(keys.iter().all(|k| k.contains('.')), "keys are table.key");
     }
 
