@@ -90,7 +90,17 @@ pub fn build_device(design: &Design, progress: &dyn Progress) -> Result<DeviceBu
 
 /// `moirecast device`: builds the device of `spec` and writes
 /// `device.stl` and `report.json` into `out` — all of them, or nothing.
-pub fn run_device(spec: &Spec, out: &Path, progress: &dyn Progress) -> Result<Vec<PathBuf>> {
+/// What `moirecast device` wrote, for the summary it prints.
+pub struct DeviceOutcome {
+    pub written: Vec<PathBuf>,
+    pub triangles: usize,
+    pub volume_mm3: f64,
+    pub bytes: usize,
+    pub checks: usize,
+    pub worst_surface_error_mm: f64,
+}
+
+pub fn run_device(spec: &Spec, out: &Path, progress: &dyn Progress) -> Result<DeviceOutcome> {
     let build = build_device(&spec.design, progress)?;
     let (checks, solid) = build.validated();
     if let Some(c) = checks.iter().find(|c| !c.passed) {
@@ -112,7 +122,18 @@ pub fn run_device(spec: &Spec, out: &Path, progress: &dyn Progress) -> Result<Ve
         "report.json",
         (serde_json::to_string_pretty(&report)? + "\n").into_bytes(),
     );
+    let bytes = files.sizes().iter().map(|(_, b)| b).sum();
     let written = files.commit(out)?;
     progress.tick(1);
-    Ok(written)
+    Ok(DeviceOutcome {
+        written,
+        triangles: build.mesh.mesh.triangles.len(),
+        volume_mm3: build.mesh.mesh.volume(),
+        bytes,
+        checks: checks.len(),
+        worst_surface_error_mm: checks
+            .iter()
+            .find(|c| c.name == "surface-to-mesh")
+            .map_or(f64::NAN, |c| c.value),
+    })
 }

@@ -128,12 +128,29 @@ fn run(cli: Cli) -> Result<()> {
             };
             let result = moirecast::run_device(&spec, &out, &bars);
             bars.done();
-            let written = result?;
+            let done = result?;
             if !quiet {
-                for f in &written {
+                let d = &spec.design;
+                eprintln!(
+                    "{} lenses on a {} ({} × {} mm): {} triangles, {:.1} mm³, surface within {:.2} µm of exact (tolerance {} µm); {} checks passed",
+                    d.lenses,
+                    d.params.surface.kind(),
+                    d.params.width,
+                    d.params.height,
+                    done.triangles,
+                    done.volume_mm3,
+                    done.worst_surface_error_mm * 1e3,
+                    d.tolerance.mm() * 1e3,
+                    done.checks
+                );
+                for f in &done.written {
                     eprintln!("wrote {}", f.display());
                 }
-                eprintln!("done in {:.2} s", started.elapsed().as_secs_f64());
+                eprintln!(
+                    "{:.1} MB in {:.2} s",
+                    done.bytes as f64 / 1e6,
+                    started.elapsed().as_secs_f64()
+                );
             }
         }
     }

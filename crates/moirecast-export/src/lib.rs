@@ -48,21 +48,45 @@ pub fn validate<'a>(
 /// Encodes a validated solid as binary STL (f32 coordinates, outward facet
 /// normals). Taking a [`SolidMesh`] means an unchecked mesh cannot be written.
 pub fn stl_bytes(file: &str, solid: SolidMesh) -> Result<Vec<u8>, ExportError> {
+    use rayon::prelude::*;
+    const HEADER: usize = 84;
     let mesh = solid.mesh();
-    let triangles = mesh.triangles.iter().map(|t| {
-        let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
-        let n = (b - a).cross(c - a).normalize_or_zero();
-        let v = |p: glam::DVec3| stl_io::Vertex::new([p.x as f32, p.y as f32, p.z as f32]);
-        stl_io::Triangle {
-            normal: stl_io::Normal::new([n.x as f32, n.y as f32, n.z as f32]),
-            vertices: [v(a), v(b), v(c)],
-        }
-    });
-    let mut out = Vec::with_capacity(84 + 50 * mesh.triangles.len());
-    stl_io::write_stl(&mut out, triangles).map_err(|source| ExportError::Io {
+    // stl_io encodes fixed-size chunks in parallel; each chunk is a complete
+    // STL (80-byte header, count, 50 bytes per triangle), so the file is the
+    // first chunk's header with the total count, then every chunk's records.
+    let encode = |tris: &[[u32; 3]]| -> std::io::Result<Vec<u8>> {
+        let triangles = tris.iter().map(|t| {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+            let n = (b - a).cross(c - a).normalize_or_zero();
+            let v = |p: glam::DVec3| stl_io::Vertex::new([p.x as f32, p.y as f32, p.z as f32]);
+            stl_io::Triangle {
+                normal: stl_io::Normal::new([n.x as f32, n.y as f32, n.z as f32]),
+                vertices: [v(a), v(b), v(c)],
+            }
+        });
+        let mut out = Vec::with_capacity(HEADER + 50 * tris.len());
+        stl_io::write_stl(&mut out, triangles)?;
+        Ok(out)
+    };
+    let io = |source| ExportError::Io {
         path: file.into(),
         source,
-    })?;
+    };
+    let chunks: Vec<Vec<u8>> = mesh
+        .triangles
+        .par_chunks(65536)
+        .map(encode)
+        .collect::<Result<_, _>>()
+        .map_err(io)?;
+    let mut out = Vec::with_capacity(HEADER + 50 * mesh.triangles.len());
+    match chunks.first() {
+        Some(first) => out.extend_from_slice(&first[..HEADER]),
+        None => out.extend_from_slice(&encode(&[]).map_err(io)?),
+    }
+    out[80..HEADER].copy_from_slice(&(mesh.triangles.len() as u32).to_le_bytes());
+    for c in &chunks {
+        out.extend_from_slice(&c[HEADER..]);
+    }
     Ok(out)
 }
 
@@ -182,5 +206,57 @@ mod tests {
             .count();
         assert_eq!(leftovers, 0);
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+#[cfg(test)]
+mod chunked_stl {
+    use super::*;
+    use moirecast_kernel::*;
+
+    /// The parallel, chunked encoding is byte-identical to one stl_io call
+    /// over all triangles (a device of more than one chunk).
+    #[test]
+    fn chunked_stl_equals_a_single_stl_io_write() {
+        let design = Design::new(DesignParams {
+            surface: PitchSurface::Plane,
+            width: 20.0,
+            height: 20.0,
+            period: 0.5,
+            lens: LensParams {
+                afov: 60f64.to_radians(),
+                index: 1.41,
+                rule: LensRule::ConstantAfov,
+            },
+            base: BaseParams {
+                a: 0.0,
+                d: None,
+                levels: 1.0,
+                afov: None,
+            },
+            profile: Profile::Rings { wavelength: 4.0 },
+            tolerance: 0.001,
+        })
+        .unwrap();
+        let dm = mesher::mesh_device(&design, &progress::Silent).unwrap();
+        assert!(
+            dm.mesh.triangles.len() > 65536,
+            "{} triangles: one chunk only",
+            dm.mesh.triangles.len()
+        );
+        let chunked = stl_bytes("d.stl", validate("d.stl", &dm.mesh).unwrap()).unwrap();
+        let m = &dm.mesh;
+        let all = m.triangles.iter().map(|t| {
+            let [a, b, c] = t.map(|i| m.positions[i as usize]);
+            let n = (b - a).cross(c - a).normalize_or_zero();
+            let v = |p: glam::DVec3| stl_io::Vertex::new([p.x as f32, p.y as f32, p.z as f32]);
+            stl_io::Triangle {
+                normal: stl_io::Normal::new([n.x as f32, n.y as f32, n.z as f32]),
+                vertices: [v(a), v(b), v(c)],
+            }
+        });
+        let mut single = Vec::new();
+        stl_io::write_stl(&mut single, all).unwrap();
+        assert!(chunked == single, "chunked encoding differs");
     }
 }

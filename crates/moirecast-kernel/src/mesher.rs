@@ -36,6 +36,8 @@ const ACROSS_SHARE: f64 = 0.45;
 /// Share of the tolerance given to the chordal error along a lens. The two
 /// add at most at a triangle's interior; the rest is margin for the twist.
 const ALONG_SHARE: f64 = 0.4;
+/// How far (mm) an interior base vertex may lie from its row's plane y = const.
+const INTERIOR_ROW_RESIDUAL_MM: f64 = 1e-6;
 /// Cells of the curvature survey along y.
 const SURVEY_CELLS: usize = 256;
 
@@ -249,22 +251,20 @@ struct BaseRow {
 }
 
 impl BaseRow {
-    /// The lens cut by `side`'s x-wall on this row and the arc parameter of
-    /// the cut, if a lens (not just a crease) meets that wall.
-    fn wall_cut(&self, side: Side) -> Option<(i64, f64)> {
-        let mut present = self.lenses.iter().filter(|(_, p)| p.len() > 1);
+    /// The lens that meets `side`'s x-wall on this row and the vertex where
+    /// it does. A lens that only touches the wall with a crease (one vertex)
+    /// counts: that crease also starts the next lens, which the next row may cut.
+    fn wall_vertex(&self, side: Side) -> Option<(i64, VertexOrigin)> {
         let (k, poly) = match side {
-            Side::Left => present.next()?,
-            _ => present.next_back()?,
+            Side::Left => self.lenses.iter().next()?,
+            _ => self.lenses.iter().next_back()?,
         };
         let v = if side == Side::Left {
             poly[0]
         } else {
             *poly.last()?
         };
-        self.origins[v as usize]
-            .params_on(LensRef::Base(*k))
-            .map(|p| (*k, p.x))
+        Some((*k, self.origins[v as usize]))
     }
 }
 
@@ -457,28 +457,36 @@ impl<'a> Planner<'a> {
         let mut ys = Vec::new();
         for (k, samples) in creases {
             for wall in [d.outline_x.0, d.outline_x.1] {
-                for w in samples.windows(2) {
-                    // A sign change between survey stations is a crossing
-                    // (the wall snap is a rule for mesh rows, not for samples).
-                    let (s0, s1) = (w[0].1.x - wall, w[1].1.x - wall);
-                    if (s0 > 0.0) == (s1 > 0.0) {
+                // Samples are inside, outside, or within the snap band of the
+                // wall. A crossing is a move from clearly inside to clearly
+                // outside (or back), possibly through band samples; a crease
+                // that only touches the band (a tangential touch) needs no row.
+                let mut last: Option<(f64, f64)> = None; // (v, signed distance) of the last clear sample
+                for &(v, p) in samples {
+                    let s = p.x - wall;
+                    if s.abs() <= WALL_SNAP_MM {
                         continue;
                     }
-                    // the root bracketed by these two stations, not another one
-                    let v = bracketed_secant(
-                        w[0].0,
-                        w[1].0,
-                        &|| format!("base crease {k} meeting the wall x = {wall}"),
-                        |v| {
-                            d.base_crease_point(*k, v)
-                                .map(|p| p.x - wall)
-                                .unwrap_or(f64::NAN)
-                        },
-                    )?;
-                    let y = d.base_crease_point(*k, v)?.y;
-                    if y > -hh && y < hh {
-                        ys.push(y);
+                    if let Some((v0, s0)) = last {
+                        if (s0 > 0.0) != (s > 0.0) {
+                            // the root bracketed by these two samples, not another one
+                            let root = bracketed_secant(
+                                v0,
+                                v,
+                                &|| format!("base crease {k} meeting the wall x = {wall}"),
+                                |v| {
+                                    d.base_crease_point(*k, v)
+                                        .map(|p| p.x - wall)
+                                        .unwrap_or(f64::NAN)
+                                },
+                            )?;
+                            let y = d.base_crease_point(*k, root)?.y;
+                            if y > -hh && y < hh {
+                                ys.push(y);
+                            }
+                        }
                     }
+                    last = Some((v, s));
                 }
             }
         }
@@ -624,16 +632,20 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
         let mut extra = Vec::new();
         for r in 0..base_rows.len() - 1 {
             for side in [Side::Left, Side::Right] {
-                let (Some((ka, ta)), Some((kb, tb))) = (
-                    base_row_data[r].wall_cut(side),
-                    base_row_data[r + 1].wall_cut(side),
+                let (Some((ka, oa)), Some((kb, ob))) = (
+                    base_row_data[r].wall_vertex(side),
+                    base_row_data[r + 1].wall_vertex(side),
                 ) else {
                     continue;
                 };
-                if ka != kb {
-                    continue; // a crease crosses the wall between: its crossing row bounds the strip
-                }
-                let cols = base_columns.get(&ka).copied().unwrap_or(2) as f64;
+                // the lens both wall vertices lie on (a crease lies on two);
+                // none means a crease crosses between, and its row bounds the strip
+                let shared = [ka, kb].into_iter().find_map(|k| {
+                    let lens = LensRef::Base(k);
+                    Some((k, oa.params_on(lens)?.x, ob.params_on(lens)?.x))
+                });
+                let Some((k, ta, tb)) = shared else { continue };
+                let cols = base_columns.get(&k).copied().unwrap_or(2) as f64;
                 let pieces = ((ta - tb).abs() * cols).ceil() as usize;
                 for p in 1..pieces {
                     extra.push(
@@ -892,6 +904,16 @@ fn base_row(
     xr: f64,
 ) -> Result<BaseRow> {
     let (k0, k1) = d.base_creases;
+    // An interior vertex is on its exact surface at whatever station it is
+    // evaluated; the residual only says how far it is from its row's plane.
+    // That must be round-off on the wall rows y = ±H/2, while elsewhere a
+    // nanometre changes nothing.
+    let on_wall = y.abs() == d.half_height;
+    let row_residual = if on_wall {
+        SOLVE_RESIDUAL_MM
+    } else {
+        INTERIOR_ROW_RESIDUAL_MM
+    };
     // crease vertices (k0..=k1), solved to lie at height y; neighbouring
     // creases have nearly the same station, so each starts from the last,
     // with its layout u predicted from the last solve
@@ -1033,7 +1055,7 @@ fn base_row(
                 for _ in 0..12 {
                     let p = d.base_arc_near(k, v, predict(v))?.point(t);
                     let r = p.y - y;
-                    if r.abs() <= SOLVE_RESIDUAL_MM {
+                    if r.abs() <= row_residual {
                         found = Some(p);
                         break;
                     }

@@ -156,6 +156,26 @@ fn meshes_are_deterministic() {
     assert_eq!(a.mesh, b.mesh);
 }
 
+/// Regression: on a plane with rings of wavelength 4 and A·T = 0.5, base crease
+/// −1 lies at x = −10.5 + E and E peaks at 0.5 on the wall x = −10, so the
+/// crease touches the wall tangentially at y = 0. Round-off once turned the
+/// touch into a fake crossing whose solve failed.
+#[test]
+fn a_crease_touching_a_wall_tangentially() {
+    let mut p = params(PitchSurface::Plane, 40, 20.0, 0.5);
+    p.base.levels = 1.0;
+    p.profile = Profile::Rings { wavelength: 4.0 };
+    let d = Design::new(p).unwrap();
+    let c = d.base_crease_point(-1, 0.0).unwrap();
+    assert!(
+        (c.x + 10.0).abs() < 1e-12,
+        "the crease touches the wall: x = {}",
+        c.x
+    );
+    let dm = mesh_device(&d, &Silent).unwrap();
+    assert_device_invariants(&d, &dm);
+}
+
 #[test]
 fn the_self_intersection_checks_catch_folds_and_crossings() {
     let mut p = params(PitchSurface::Saddle { radius: 40.0 }, 8, 2.0, 0.5);
