@@ -522,18 +522,6 @@ fn insert_rows(rows: &mut Vec<f64>, crossings: &[f64]) {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::insert_rows;
-
-    #[test]
-    fn crossing_rows_are_never_moved() {
-        let mut rows = vec![-1.0, 0.0, 1.0];
-        insert_rows(&mut rows, &[0.05, 0.09, -0.5]);
-        assert_eq!(rows, vec![-1.0, -0.5, 0.05, 0.09, 1.0]);
-    }
-}
-
 /// Builds the device mesh of `design`.
 pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMesh> {
     let planner = Planner { design };
@@ -1083,4 +1071,16 @@ fn base_row(
     }
     // vertices were pushed left to right, so the row's span is ends.0..=ends.1
     Ok(row)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::insert_rows;
+
+    #[test]
+    fn crossing_rows_are_never_moved() {
+        let mut rows = vec![-1.0, 0.0, 1.0];
+        insert_rows(&mut rows, &[0.05, 0.09, -0.5]);
+        assert_eq!(rows, vec![-1.0, -0.5, 0.05, 0.09, 1.0]);
+    }
 }

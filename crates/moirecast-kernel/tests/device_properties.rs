@@ -224,9 +224,49 @@ fn surface_strategy() -> impl Strategy<Value = PitchSurface> {
     ]
 }
 
+/// A 24 × 24 raster of random dark discs, as an image profile over an
+/// 8 × 6 mm layout (gray or shape mode, blurred).
+fn image_profile() -> impl Strategy<Value = Profile> {
+    (
+        prop::collection::vec((0.0..24.0f64, 0.0..24.0f64, 2.0..7.0f64), 1..4),
+        prop::bool::ANY,
+        0.6..2.0f64,
+    )
+        .prop_map(|(discs, shape, blur)| {
+            let n = 24;
+            let lum = (0..n * n)
+                .map(|c| {
+                    let (x, y) = ((c % n) as f64 + 0.5, (c / n) as f64 + 0.5);
+                    if discs.iter().any(|&(cx, cy, r)| (x - cx).hypot(y - cy) < r) {
+                        0.1
+                    } else {
+                        0.9
+                    }
+                })
+                .collect();
+            let raster = Raster {
+                width: n,
+                height: n,
+                luminance: lum,
+            };
+            let mode = if shape {
+                ProfileMode::Shape { threshold: 0.5 }
+            } else {
+                ProfileMode::Gray
+            };
+            Profile::Sampled(
+                moirecast_kernel::profile::SampledProfile::from_raster(
+                    &raster, mode, false, blur, 8.0, 6.0,
+                )
+                .unwrap(),
+            )
+        })
+}
+
 fn profile_strategy() -> impl Strategy<Value = Profile> {
     prop_oneof![
         Just(Profile::Flat),
+        image_profile(),
         (2.0..10.0f64).prop_map(|w| Profile::Rings { wavelength: w }),
         (0.0..3.2f64).prop_map(|a| Profile::ramp(a, 8.0, 6.0)),
         (1.0..4.0f64).prop_map(|s| Profile::Bump { sigma: s }),
