@@ -101,8 +101,11 @@ impl NamedExpr {
 
     fn eval(&self, x: f64, y: f64) -> f64 {
         let Some(expr) = &self.expr else { return 0.0 };
-        let vars: Vec<f64> = self.slots.iter().map(|&s| if s { x } else { y }).collect();
-        expr.eval(&vars).unwrap_or(f64::NAN)
+        let mut vars = [0.0; 2];
+        for (v, &s) in vars.iter_mut().zip(&self.slots) {
+            *v = if s { x } else { y };
+        }
+        expr.eval(&vars[..self.slots.len()]).unwrap_or(f64::NAN)
     }
 }
 
@@ -120,6 +123,16 @@ impl FormulaSurface {
             source: source.to_owned(),
             terms: Arc::new([h, hx, hy, hxx, hxy, hyy]),
         })
+    }
+
+    /// z = h(x, y) only.
+    fn value(&self, x: f64, y: f64) -> f64 {
+        self.terms[0].eval(x, y)
+    }
+
+    /// (h_x, h_y) only.
+    fn gradient(&self, x: f64, y: f64) -> (f64, f64) {
+        (self.terms[1].eval(x, y), self.terms[2].eval(x, y))
     }
 
     fn eval(&self, x: f64, y: f64) -> [f64; 6] {
@@ -205,6 +218,7 @@ impl PitchSurface {
                 DVec3::new(r * a.sin(), v, r * a.cos() - r)
             }
             PitchSurface::Plane => DVec3::new(u, v, 0.0),
+            PitchSurface::Formula(f) => DVec3::new(u, v, f.value(u, v)),
             _ => DVec3::new(u, v, self.height(u, v)[0]),
         }
     }
@@ -247,7 +261,13 @@ impl PitchSurface {
                 DVec3::new(s, 0.0, c)
             }
             _ => {
-                let [_, hx, hy, ..] = self.height(u, v);
+                let (hx, hy) = match self {
+                    PitchSurface::Formula(f) => f.gradient(u, v),
+                    _ => {
+                        let [_, hx, hy, ..] = self.height(u, v);
+                        (hx, hy)
+                    }
+                };
                 DVec3::new(-hx, -hy, 1.0).normalize()
             }
         }
