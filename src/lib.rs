@@ -56,14 +56,38 @@ fn afov_check(design: &Design, stats: &measure::LensStats) -> Option<CheckResult
     ))
 }
 
-/// Builds and checks the device mesh (METHOD §7.1–§7.3). Checks that fail
-/// are returned, not raised: the caller decides.
+/// How thoroughly the measurements against the exact model run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Thoroughness {
+    /// Sampled: a few thousand vertices and lens triangles (fast).
+    #[default]
+    Sampled,
+    /// Every vertex and every lens triangle.
+    Full,
+}
+
+/// Builds and checks the device mesh (METHOD §7.1–§7.3) with sampled
+/// measurements. Checks that fail are returned, not raised: the caller decides.
 pub fn build_device(design: &Design, progress: &dyn Progress) -> Result<DeviceBuild> {
+    build_device_checked(design, Thoroughness::Sampled, progress)
+}
+
+/// [`build_device`] with a choice of how thoroughly to measure.
+pub fn build_device_checked(
+    design: &Design,
+    thoroughness: Thoroughness,
+    progress: &dyn Progress,
+) -> Result<DeviceBuild> {
     let mesh = mesh_device(design, progress).context("meshing the device")?;
     progress.stage("checking", 1);
     let mut checks = Vec::new();
-    let v_stride = (mesh.mesh.positions.len() / REPORT_VERTEX_SAMPLES).max(1);
-    let t_stride = (mesh.mesh.triangles.len() / REPORT_TRIANGLE_SAMPLES).max(1);
+    let (v_stride, t_stride) = match thoroughness {
+        Thoroughness::Full => (1, 1),
+        Thoroughness::Sampled => (
+            (mesh.mesh.positions.len() / REPORT_VERTEX_SAMPLES).max(1),
+            (mesh.mesh.triangles.len() / REPORT_TRIANGLE_SAMPLES).max(1),
+        ),
+    };
     checks.push(measure::vertex_on_surface(design, &mesh, v_stride));
     checks.push(measure::surface_to_mesh(design, &mesh, t_stride));
     checks.push(measure::walls_on_outline(design, &mesh));
@@ -100,8 +124,13 @@ pub struct DeviceOutcome {
     pub worst_surface_error_mm: f64,
 }
 
-pub fn run_device(spec: &Spec, out: &Path, progress: &dyn Progress) -> Result<DeviceOutcome> {
-    let build = build_device(&spec.design, progress)?;
+pub fn run_device(
+    spec: &Spec,
+    out: &Path,
+    thoroughness: Thoroughness,
+    progress: &dyn Progress,
+) -> Result<DeviceOutcome> {
+    let build = build_device_checked(&spec.design, thoroughness, progress)?;
     let (checks, solid) = build.validated();
     if let Some(c) = checks.iter().find(|c| !c.passed) {
         bail!(

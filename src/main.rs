@@ -29,6 +29,10 @@ enum Command {
         /// Print how long each stage took.
         #[arg(short, long)]
         verbose: bool,
+        /// Measure every vertex and lens triangle against the exact model
+        /// (the default samples a few thousand; slower, same checks).
+        #[arg(long)]
+        full_checks: bool,
     },
 }
 
@@ -101,6 +105,7 @@ fn run(cli: Cli) -> Result<()> {
         out: PathBuf::from("moirecast-out"),
         quiet: false,
         verbose: false,
+        full_checks: false,
     });
     match command {
         Command::Device {
@@ -108,6 +113,7 @@ fn run(cli: Cli) -> Result<()> {
             out,
             quiet,
             verbose,
+            full_checks,
         } => {
             let bars = Bars {
                 quiet,
@@ -126,7 +132,16 @@ fn run(cli: Cli) -> Result<()> {
                     moirecast_spec::default_spec()?
                 }
             };
-            let result = moirecast::run_device(&spec, &out, &bars);
+            let result = moirecast::run_device(
+                &spec,
+                &out,
+                if full_checks {
+                    moirecast::Thoroughness::Full
+                } else {
+                    moirecast::Thoroughness::Sampled
+                },
+                &bars,
+            );
             bars.done();
             let done = result?;
             if !quiet {

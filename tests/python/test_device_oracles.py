@@ -70,3 +70,21 @@ def test_a_shipped_spec_is_byte_deterministic(tmp_path):
     b, _ = build(spec, tmp_path / "b")
     assert a.read_bytes() == b.read_bytes()
     assert (tmp_path / "a" / "report.json").read_bytes() == (tmp_path / "b" / "report.json").read_bytes()
+
+
+def test_full_checks_measure_every_vertex(tmp_path):
+    """`--full-checks` measures every vertex and lens triangle; all pass."""
+    import json
+    import subprocess
+
+    from conftest import BIN
+
+    spec = next(s for s in SPECS if s.stem == "plane-rings")
+    r = subprocess.run([str(BIN), "device", str(spec), "-o", str(tmp_path), "--quiet", "--full-checks"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    report = json.loads((tmp_path / "report.json").read_text())
+    checks = {c["name"]: c for c in report["checks"]}
+    assert all(c["passed"] for c in checks.values()), [c for c in checks.values() if not c["passed"]]
+    assert checks["vertex-on-surface"]["detail"].startswith("every vertex")
+    assert "every lens triangle" in checks["surface-to-mesh"]["detail"]
+    assert checks["surface-to-mesh"]["value"] <= report["design"]["tolerance_mm"]

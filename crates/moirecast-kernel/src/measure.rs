@@ -116,6 +116,14 @@ pub fn revealer_lens_stats(design: &Design, dm: &DeviceMesh) -> LensStats {
     )
 }
 
+/// "every vertex" or "every 7th vertex".
+fn every(stride: usize, what: &str) -> String {
+    match stride.max(1) {
+        1 => format!("every {what}"),
+        n => format!("every {n}th {what}"),
+    }
+}
+
 /// Which lens a vertex lies on (for a crease: the lens to its right, or the
 /// last lens for the last crease).
 fn lens_of(design: &Design, o: &VertexOrigin) -> LensRef {
@@ -171,8 +179,8 @@ pub fn vertex_on_surface(design: &Design, dm: &DeviceMesh, stride: usize) -> Che
         1e-9,
         "mm",
         format!(
-            "every {}th vertex re-projected; worst at ({:.3}, {:.3}, {:.3})",
-            stride.max(1),
+            "{} re-projected; worst at ({:.3}, {:.3}, {:.3})",
+            every(stride, "vertex"),
             p.x,
             p.y,
             p.z
@@ -275,8 +283,8 @@ pub fn surface_to_mesh(design: &Design, dm: &DeviceMesh, stride: usize) -> Check
         design.tolerance.mm(),
         "mm",
         format!(
-            "7 samples on every {}th lens triangle; worst near ({:.3}, {:.3}, {:.3})",
-            stride.max(1),
+            "7 samples on {}; worst near ({:.3}, {:.3}, {:.3})",
+            every(stride, "lens triangle"),
             worst.1.x,
             worst.1.y,
             worst.1.z
@@ -505,8 +513,8 @@ pub fn min_thickness(design: &Design, dm: &DeviceMesh, stride: usize) -> CheckRe
         design.tolerance.mm(),
         "mm",
         format!(
-            "revealer above base at every {}th base vertex; thinnest at ({:.3}, {:.3})",
-            stride.max(1),
+            "revealer above base at {}; thinnest at ({:.3}, {:.3})",
+            every(stride, "base vertex"),
             at.x,
             at.y
         ),
