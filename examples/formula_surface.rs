@@ -10,26 +10,9 @@ fn main() -> anyhow::Result<()> {
     let surface = PitchSurface::Formula(
         FormulaSurface::parse("2*sin(x/8)*cos(y/10)").map_err(anyhow::Error::msg)?,
     );
-    let design = Design::new(DesignParams {
-        surface,
-        width: 20.0,
-        height: 12.0,
-        period: 0.5,
-        lens: LensParams {
-            afov: 60f64.to_radians(),
-            index: 1.41,
-            rule: LensRule::ConstantAfov,
-        },
-        base: BaseParams {
-            a: 0.0,
-            d: None,
-            levels: 1.0,
-            afov: None,
-        },
-        profile: Profile::Rings { wavelength: 5.0 },
-        tolerance: 0.002,
-    })
-    .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut params = DesignParams::with_defaults(surface, 20.0, 12.0, 0.5);
+    params.profile = Profile::Rings { wavelength: 5.0 };
+    let design = Design::new(params).map_err(|e| anyhow::anyhow!("{e}"))?;
     let build = moirecast::build_device(&design, &progress::Silent)?;
     let (checks, solid) = build.validated();
     let s = &build.mesh.stats;

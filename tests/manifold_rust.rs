@@ -22,26 +22,11 @@ fn to_manifold(mesh: &Mesh) -> Manifold {
 }
 
 fn design(surface: PitchSurface, profile: Profile, a: f64) -> Design {
-    Design::new(DesignParams {
-        surface,
-        width: 8.0,
-        height: 5.0,
-        period: 0.5,
-        lens: LensParams {
-            afov: 60f64.to_radians(),
-            index: 1.41,
-            rule: LensRule::ConstantAfov,
-        },
-        base: BaseParams {
-            a,
-            d: None,
-            levels: 1.0,
-            afov: None,
-        },
-        profile,
-        tolerance: 0.003,
-    })
-    .unwrap()
+    let mut p = DesignParams::with_defaults(surface, 8.0, 5.0, 0.5);
+    p.profile = profile;
+    p.base.a = a;
+    p.tolerance = 0.003;
+    Design::new(p).unwrap()
 }
 
 #[test]

@@ -55,15 +55,7 @@ pub fn stl_bytes(file: &str, solid: SolidMesh) -> Result<Vec<u8>, ExportError> {
     // STL (80-byte header, count, 50 bytes per triangle), so the file is the
     // first chunk's header with the total count, then every chunk's records.
     let encode = |tris: &[[u32; 3]]| -> std::io::Result<Vec<u8>> {
-        let triangles = tris.iter().map(|t| {
-            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
-            let n = (b - a).cross(c - a).normalize_or_zero();
-            let v = |p: glam::DVec3| stl_io::Vertex::new([p.x as f32, p.y as f32, p.z as f32]);
-            stl_io::Triangle {
-                normal: stl_io::Normal::new([n.x as f32, n.y as f32, n.z as f32]),
-                vertices: [v(a), v(b), v(c)],
-            }
-        });
+        let triangles = tris.iter().map(|t| stl_triangle(mesh, t));
         let mut out = Vec::with_capacity(HEADER + 50 * tris.len());
         stl_io::write_stl(&mut out, triangles)?;
         Ok(out)
@@ -88,6 +80,17 @@ pub fn stl_bytes(file: &str, solid: SolidMesh) -> Result<Vec<u8>, ExportError> {
         out.extend_from_slice(&c[HEADER..]);
     }
     Ok(out)
+}
+
+/// One STL facet: f32 corners and the outward unit normal.
+fn stl_triangle(mesh: &moirecast_kernel::Mesh, t: &[u32; 3]) -> stl_io::Triangle {
+    let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+    let n = (b - a).cross(c - a).normalize_or_zero();
+    let v = |p: glam::DVec3| stl_io::Vertex::new([p.x as f32, p.y as f32, p.z as f32]);
+    stl_io::Triangle {
+        normal: stl_io::Normal::new([n.x as f32, n.y as f32, n.z as f32]),
+        vertices: [v(a), v(b), v(c)],
+    }
 }
 
 /// Files staged for one output directory, written together by [`commit`](Self::commit).
@@ -218,26 +221,10 @@ mod chunked_stl {
     /// over all triangles (a device of more than one chunk).
     #[test]
     fn chunked_stl_equals_a_single_stl_io_write() {
-        let design = Design::new(DesignParams {
-            surface: PitchSurface::Plane,
-            width: 20.0,
-            height: 20.0,
-            period: 0.5,
-            lens: LensParams {
-                afov: 60f64.to_radians(),
-                index: 1.41,
-                rule: LensRule::ConstantAfov,
-            },
-            base: BaseParams {
-                a: 0.0,
-                d: None,
-                levels: 1.0,
-                afov: None,
-            },
-            profile: Profile::Rings { wavelength: 4.0 },
-            tolerance: 0.001,
-        })
-        .unwrap();
+        let mut params = DesignParams::with_defaults(PitchSurface::Plane, 20.0, 20.0, 0.5);
+        params.profile = Profile::Rings { wavelength: 4.0 };
+        params.tolerance = 0.001;
+        let design = Design::new(params).unwrap();
         let dm = mesher::mesh_device(&design, &progress::Silent).unwrap();
         assert!(
             dm.mesh.triangles.len() > 65536,
@@ -246,15 +233,7 @@ mod chunked_stl {
         );
         let chunked = stl_bytes("d.stl", validate("d.stl", &dm.mesh).unwrap()).unwrap();
         let m = &dm.mesh;
-        let all = m.triangles.iter().map(|t| {
-            let [a, b, c] = t.map(|i| m.positions[i as usize]);
-            let n = (b - a).cross(c - a).normalize_or_zero();
-            let v = |p: glam::DVec3| stl_io::Vertex::new([p.x as f32, p.y as f32, p.z as f32]);
-            stl_io::Triangle {
-                normal: stl_io::Normal::new([n.x as f32, n.y as f32, n.z as f32]),
-                vertices: [v(a), v(b), v(c)],
-            }
-        });
+        let all = m.triangles.iter().map(|t| stl_triangle(m, t));
         let mut single = Vec::new();
         stl_io::write_stl(&mut single, all).unwrap();
         assert!(chunked == single, "chunked encoding differs");

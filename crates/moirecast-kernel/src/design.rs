@@ -53,6 +53,33 @@ pub struct DesignParams {
     pub tolerance: f64,
 }
 
+impl DesignParams {
+    /// A design on `surface` with METHOD's defaults: α = 60°, n_l = 1.41
+    /// (Sylgard 184), constant AFOV, a = 0, d = D_s, one level, a flat
+    /// profile and a 2 µm tolerance. Change fields to taste.
+    pub fn with_defaults(surface: PitchSurface, width: f64, height: f64, period: f64) -> Self {
+        DesignParams {
+            surface,
+            width,
+            height,
+            period,
+            lens: LensParams {
+                afov: 60f64.to_radians(),
+                index: 1.41,
+                rule: LensRule::ConstantAfov,
+            },
+            base: BaseParams {
+                a: 0.0,
+                d: None,
+                levels: 1.0,
+                afov: None,
+            },
+            profile: Profile::Flat,
+            tolerance: 0.002,
+        }
+    }
+}
+
 /// The standard lens: the lens of the flat device, w_s = T (METHOD §2).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StandardLens {

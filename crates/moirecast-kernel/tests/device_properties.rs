@@ -9,25 +9,9 @@ use moirecast_kernel::*;
 use proptest::prelude::*;
 
 fn params(surface: PitchSurface, lenses: usize, height: f64, period: f64) -> DesignParams {
-    DesignParams {
-        surface,
-        width: lenses as f64 * period,
-        height,
-        period,
-        lens: LensParams {
-            afov: 60f64.to_radians(),
-            index: 1.41,
-            rule: LensRule::ConstantAfov,
-        },
-        base: BaseParams {
-            a: 0.0,
-            d: None,
-            levels: 0.0,
-            afov: None,
-        },
-        profile: Profile::Flat,
-        tolerance: 0.002,
-    }
+    let mut p = DesignParams::with_defaults(surface, lenses as f64 * period, height, period);
+    p.base.levels = 0.0;
+    p
 }
 
 /// Every invariant of METHOD §7.1–§7.3 that the device mesh must satisfy,
