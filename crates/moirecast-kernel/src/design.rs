@@ -372,7 +372,30 @@ impl Design {
             design.surface().x_of_u(design.crease_u(0)),
             design.surface().x_of_u(design.crease_u(n as i64)),
         );
-        design.validate_surface(base_afov)?;
+        // The base lies up to d_eff below f, so the surface is needed (and
+        // validated) over a margin around the layout that depends on d_eff,
+        // which with a > 0 depends on the surface out there: grow the margin
+        // until the validated region covers the base it finds.
+        let mut covered = false;
+        for _ in 0..6 {
+            let validated = design.margin;
+            design.validate_surface(base_afov)?;
+            if design.margin <= validated {
+                design.margin = validated;
+                covered = true;
+                break;
+            }
+            // validate a padded region next, so the search settles quickly
+            design.margin *= 1.25;
+        }
+        if !covered {
+            return Err(err(
+                Param::BaseA,
+                design.params.base.a,
+                format!("the focal surface keeps moving away from the layout as the layout grows (base depth over {:.1} mm)", design.margin),
+                "use a smaller a, or a flatter surface",
+            ));
+        }
         design.validate_profile()?;
         // Base creases that can reach the extended layout: φ = (u + W/2 − E)/T, E ∈ [0, A·T].
         let a_t = design.params.base.levels * design.params.period;

@@ -323,3 +323,53 @@ proptest! {
         prop_assert!(v <= exact && exact - v <= 2.0 * w * height * d.tolerance.mm(), "mesh {v} vs exact {exact}");
     }
 }
+
+prop_compose! {
+    /// Mostly plausible, sometimes wild inputs (each parameter out of range
+    /// one time in ten): validation must sort them and never panic.
+    fn wild_params()(
+        surface in prop_oneof![
+            Just(PitchSurface::Plane),
+            (-400.0..400.0f64).prop_map(|r| PitchSurface::Saddle { radius: r }),
+            (-400.0..400.0f64).prop_map(|r| PitchSurface::Paraboloid { radius: r }),
+            (-400.0..400.0f64).prop_map(|r| PitchSurface::Cylinder { radius: r }),
+            (-400.0..400.0f64).prop_map(|r| PitchSurface::Sphere { radius: r }),
+        ],
+        lenses in 1usize..16,
+        fraction in prop_oneof![9 => Just(0.0), 1 => -0.5..0.5f64],
+        period in prop_oneof![9 => 0.2..2.0f64, 1 => 0.01..4.0f64],
+        height in prop_oneof![9 => 1.0..8.0f64, 1 => -1.0..12.0f64],
+        afov in prop_oneof![9 => 20.0..110.0f64, 1 => 0.0..179.0f64],
+        index in prop_oneof![9 => 1.3..1.7f64, 1 => 0.9..3.2f64],
+        levels in prop_oneof![9 => 0.0..2.0f64, 1 => -0.5..6.0f64],
+        a in prop_oneof![9 => 0.0..1.0f64, 1 => -0.2..1.2f64],
+        d in prop_oneof![5 => Just(None), 4 => (0.5..3.0f64).prop_map(Some), 1 => (-1.0..12.0f64).prop_map(Some)],
+        tolerance_scale in prop_oneof![9 => 0.02..0.3f64, 1 => 1e-4..3.0f64],
+        profile in profile_strategy(),
+    ) -> DesignParams {
+        let mut p = DesignParams::with_defaults(surface, (lenses as f64 + fraction) * period, height, period);
+        p.lens.afov = afov.to_radians();
+        p.lens.index = index;
+        p.base = BaseParams { a, d, levels, afov: None };
+        p.profile = profile;
+        p.tolerance = tolerance_scale * StandardLens::new(period, p.lens.afov, index.max(1.01)).sag;
+        p
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// Validation has no gaps: whatever it accepts meshes into a solid.
+    #[test]
+    fn every_valid_design_meshes(p in wild_params()) {
+        let Ok(d) = Design::new(p) else { return Ok(()) };
+        // keep the suite fast: skip designs whose mesh would be huge
+        let estimate = d.lenses as f64 * (d.params.height / d.params.period) * (d.standard.sag / d.tolerance.mm());
+        prop_assume!(estimate < 2e5);
+        let dm = mesh_device(&d, &Silent).map_err(|e| TestCaseError::fail(format!("{e}")))?;
+        for c in solid_checks(&dm.mesh) {
+            prop_assert!(c.passed, "{c:?}");
+        }
+    }
+}
