@@ -157,7 +157,7 @@ pub fn run_device(
     Ok(DeviceOutcome {
         written,
         triangles: build.mesh.mesh.triangles.len(),
-        volume_mm3: build.mesh.mesh.volume(),
+        volume_mm3: report.files["device.stl"].volume_mm3,
         bytes,
         checks: checks.len(),
         worst_surface_error_mm: checks

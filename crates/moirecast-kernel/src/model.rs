@@ -47,7 +47,8 @@ impl Design {
 
     /// Base surface s(u, v) = f − ((1 − a)·d + a·D_s·λ)·n.
     pub fn base_surface(&self, u: f64, v: f64) -> DVec3 {
-        self.surface().point(u, v) - self.base_offset(u, v) * self.surface().normal(u, v)
+        let (p, n) = self.surface().point_and_normal(u, v);
+        p - self.base_offset(u, v) * n
     }
 
     /// Unit normal of s, on the same side as n, from analytic derivatives:

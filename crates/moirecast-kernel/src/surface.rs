@@ -252,6 +252,27 @@ impl PitchSurface {
         }
     }
 
+    /// Position and outward unit normal together: graph surfaces evaluate
+    /// their height function once (this is on the base's hot path).
+    pub fn point_and_normal(&self, u: f64, v: f64) -> (DVec3, DVec3) {
+        match self {
+            PitchSurface::Plane | PitchSurface::Cylinder { .. } => {
+                (self.point(u, v), self.normal(u, v))
+            }
+            PitchSurface::Formula(f) => {
+                let (hx, hy) = f.gradient(u, v);
+                (
+                    DVec3::new(u, v, f.value(u, v)),
+                    DVec3::new(-hx, -hy, 1.0).normalize(),
+                )
+            }
+            _ => {
+                let [h, hx, hy, ..] = self.height(u, v);
+                (DVec3::new(u, v, h), DVec3::new(-hx, -hy, 1.0).normalize())
+            }
+        }
+    }
+
     /// Outward unit normal n(u, v).
     pub fn normal(&self, u: f64, v: f64) -> DVec3 {
         match self {
@@ -306,6 +327,7 @@ mod tests {
         assert!((j.normal() - s.normal(u, v)).length() < 1e-12);
         assert_eq!(s.point(u, v).y, v, "xy-separable: y == v exactly");
         assert_eq!(s.point(u, v).x, s.x_of_u(u));
+        assert_eq!(s.point_and_normal(u, v), (s.point(u, v), s.normal(u, v)));
     }
 
     #[test]
