@@ -2,11 +2,12 @@
 //! mesh → checks → files. The binary (`main.rs`) only parses arguments and
 //! draws progress.
 
+pub mod mold_report;
 pub mod report;
 
 use anyhow::{bail, Context, Result};
 use moirecast_export::{stl_bytes, OutputSet};
-use moirecast_kernel::check::{CheckResult, SolidMesh};
+use moirecast_kernel::check::{CheckResult, SolidMesh, SolidSpec};
 use moirecast_kernel::mesher::{mesh_device, DeviceMesh};
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{measure, Design};
@@ -164,5 +165,95 @@ pub fn run_device(
             .iter()
             .find(|c| c.name == "surface-to-mesh")
             .map_or(f64::NAN, |c| c.value),
+    })
+}
+
+/// What `moirecast mold` wrote, for the summary it prints.
+pub struct MoldOutcome {
+    pub written: Vec<PathBuf>,
+    pub bytes: usize,
+    pub checks: usize,
+    /// Checks that failed (only with `force`).
+    pub failed: Vec<&'static str>,
+    pub warnings: Vec<String>,
+    pub volumes: moirecast_mold::Volumes,
+    pub triangles: [usize; 3],
+}
+
+/// `moirecast mold`: builds the device of `spec` and its two-piece mold and
+/// writes `device.stl`, `mold-top.stl`, `mold-bottom.stl`, `assembly.scad`
+/// and `report.json` into `out` — all of them, or nothing.
+///
+/// Every check runs before anything is written. A failed check is an error
+/// naming it and the place; with `force` the files are written anyway and
+/// the failures are listed in the report. The solid checks of each STL
+/// (METHOD §7.1) are never forced: a broken mesh is not written.
+pub fn run_mold(
+    spec: &Spec,
+    out: &Path,
+    force: bool,
+    progress: &dyn Progress,
+) -> Result<MoldOutcome> {
+    let build = build_device(&spec.design, progress)?;
+    let mold = moirecast_mold::build_mold(&spec.design, &build.mesh, &spec.mold, progress)
+        .map_err(|e| anyhow::anyhow!(moirecast_spec::describe_mold_error(&spec.origin, &e)))?;
+    progress.stage("writing", 1);
+    let mut checks: Vec<CheckResult> = build.checks.clone();
+    checks.extend(mold.checks.iter().cloned());
+    let (device_checks, device) = SolidMesh::validate(&mold.device);
+    checks.splice(0..0, device_checks);
+    if let Some(c) = checks.iter().find(|c| !c.passed) {
+        if !force {
+            bail!(
+                "check `{}` failed: measured {} {} against limit {} ({}); nothing was written (--force writes the files and marks the failure in report.json)",
+                c.name, c.value, c.unit, c.limit, c.detail
+            );
+        }
+    }
+    let (_, top) = SolidMesh::validate_for(&mold.top, SolidSpec::boolean_result(mold.genus_top));
+    let (_, bottom) =
+        SolidMesh::validate_for(&mold.bottom, SolidSpec::boolean_result(mold.genus_bottom));
+    let (Some(device), Some(top), Some(bottom)) = (device, top, bottom) else {
+        bail!("a mold part is not a valid solid (see the failed checks); nothing was written");
+    };
+    let mut files = OutputSet::new();
+    let mut reports = std::collections::BTreeMap::new();
+    for (name, solid) in [
+        ("device.stl", device),
+        ("mold-top.stl", top),
+        ("mold-bottom.stl", bottom),
+    ] {
+        let bytes = stl_bytes(name, solid)?;
+        reports.insert(
+            name.to_string(),
+            report::FileReport::of(solid.mesh(), bytes.len()),
+        );
+        files.add(name, bytes);
+    }
+    files.add(
+        "assembly.scad",
+        moirecast_export::assembly_scad(&format!("moirecast mold of {}", report::spec_name(spec)))
+            .into_bytes(),
+    );
+    let report = mold_report::mold_report(spec, &mold, &checks, reports);
+    files.add(
+        "report.json",
+        (serde_json::to_string_pretty(&report)? + "\n").into_bytes(),
+    );
+    let bytes = files.sizes().iter().map(|(_, b)| b).sum();
+    let written = files.commit(out)?;
+    progress.tick(1);
+    Ok(MoldOutcome {
+        written,
+        bytes,
+        checks: checks.len(),
+        failed: report.failed.clone(),
+        warnings: mold.features.warnings.clone(),
+        volumes: mold.volumes,
+        triangles: [
+            mold.device.triangles.len(),
+            mold.top.triangles.len(),
+            mold.bottom.triangles.len(),
+        ],
     })
 }

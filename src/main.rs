@@ -34,6 +34,44 @@ enum Command {
         #[arg(long)]
         full_checks: bool,
     },
+    /// Build the device and its two-piece casting mold: DIR/device.stl,
+    /// DIR/mold-top.stl, DIR/mold-bottom.stl, DIR/assembly.scad and DIR/report.json.
+    Mold {
+        /// The design spec (TOML), with an optional [mold] table. Without it, the reference design.
+        spec: Option<PathBuf>,
+        /// Output directory.
+        #[arg(short, long, default_value = "moirecast-out")]
+        out: PathBuf,
+        /// No progress bars.
+        #[arg(short, long)]
+        quiet: bool,
+        /// Print how long each stage took.
+        #[arg(short, long)]
+        verbose: bool,
+        /// Write the files even if a mold check fails, and mark the failure
+        /// in report.json. Meshes that are not solids are never written.
+        #[arg(long)]
+        force: bool,
+    },
+}
+
+fn bars(quiet: bool, verbose: bool) -> Bars {
+    Bars {
+        quiet,
+        verbose,
+        bar: Mutex::new(None),
+        stage_started: Mutex::new(None),
+    }
+}
+
+fn load_spec(spec: &Option<PathBuf>) -> Result<moirecast_spec::Spec> {
+    Ok(match spec {
+        Some(path) => moirecast_spec::load(path)?,
+        None => {
+            eprintln!("no spec given: building the reference design (molds/saddle-horse.toml)");
+            moirecast_spec::default_spec()?
+        }
+    })
 }
 
 /// Draws the kernel's stages as indicatif bars on stderr (hidden when
@@ -115,23 +153,10 @@ fn run(cli: Cli) -> Result<()> {
             verbose,
             full_checks,
         } => {
-            let bars = Bars {
-                quiet,
-                verbose,
-                bar: Mutex::new(None),
-                stage_started: Mutex::new(None),
-            };
+            let bars = bars(quiet, verbose);
             let started = std::time::Instant::now();
             bars.stage("reading spec", 1);
-            let spec = match &spec {
-                Some(path) => moirecast_spec::load(path)?,
-                None => {
-                    eprintln!(
-                        "no spec given: building the reference design (molds/saddle-horse.toml)"
-                    );
-                    moirecast_spec::default_spec()?
-                }
-            };
+            let spec = load_spec(&spec)?;
             let result = moirecast::run_device(
                 &spec,
                 &out,
@@ -157,6 +182,44 @@ fn run(cli: Cli) -> Result<()> {
                     done.worst_surface_error_mm * 1e3,
                     d.tolerance.mm() * 1e3,
                     done.checks
+                );
+                for f in &done.written {
+                    eprintln!("wrote {}", f.display());
+                }
+                eprintln!(
+                    "{:.1} MB in {:.2} s",
+                    done.bytes as f64 / 1e6,
+                    started.elapsed().as_secs_f64()
+                );
+            }
+        }
+        Command::Mold {
+            spec,
+            out,
+            quiet,
+            verbose,
+            force,
+        } => {
+            let bars = bars(quiet, verbose);
+            let started = std::time::Instant::now();
+            bars.stage("reading spec", 1);
+            let spec = load_spec(&spec)?;
+            let result = moirecast::run_mold(&spec, &out, force, &bars);
+            bars.done();
+            let done = result?;
+            for w in &done.warnings {
+                eprintln!("warning: {w}");
+            }
+            for f in &done.failed {
+                eprintln!("warning: check `{f}` failed; written anyway (--force)");
+            }
+            if !quiet {
+                let v = &done.volumes;
+                eprintln!(
+                    "mold: top {:.0} mm³, bottom {:.0} mm³, device {:.1} mm³ in a {:.0} mm³ block; {} / {} / {} triangles; {} checks, {} failed",
+                    v.top, v.bottom, v.device, v.block,
+                    done.triangles[1], done.triangles[2], done.triangles[0],
+                    done.checks, done.failed.len()
                 );
                 for f in &done.written {
                     eprintln!("wrote {}", f.display());

@@ -146,6 +146,15 @@ pub struct DeviceReport {
     pub checks: Vec<CheckReport>,
 }
 
+/// The spec's file name (no directories: reports and files stay byte-identical
+/// wherever the spec lives).
+pub fn spec_name(spec: &Spec) -> String {
+    std::path::Path::new(&spec.origin)
+        .file_name()
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or_else(|| spec.origin.clone())
+}
+
 pub fn design_echo(spec: &Spec) -> DesignEcho {
     let d = &spec.design;
     let p = &d.params;
@@ -200,10 +209,7 @@ pub fn device_report(
     );
     DeviceReport {
         moirecast: env!("CARGO_PKG_VERSION"),
-        spec: std::path::Path::new(&spec.origin)
-            .file_name()
-            .map(|f| f.to_string_lossy().into_owned())
-            .unwrap_or_else(|| spec.origin.clone()),
+        spec: crate::report::spec_name(spec),
         design: design_echo(spec),
         derived: Derived {
             N: d.lenses,

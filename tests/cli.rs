@@ -38,6 +38,10 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn run(spec_text: &str, dir: &Path) -> (bool, String, PathBuf) {
+    run_command("device", spec_text, dir)
+}
+
+fn run_command(command: &str, spec_text: &str, dir: &Path) -> (bool, String, PathBuf) {
     let spec = dir.join("spec.toml");
     std::fs::write(&spec, spec_text).unwrap();
     std::fs::create_dir_all(dir.join("profiles")).unwrap();
@@ -48,7 +52,7 @@ fn run(spec_text: &str, dir: &Path) -> (bool, String, PathBuf) {
     .unwrap();
     let out = dir.join("out");
     let o = Command::new(BIN)
-        .arg("device")
+        .arg(command)
         .arg(&spec)
         .arg("-o")
         .arg(&out)
@@ -91,7 +95,7 @@ fn a_small_design_builds_with_a_full_report() {
         "surface-to-mesh",
         "vertex-on-surface",
         "measured-afov",
-        "genus-0",
+        "genus",
     ] {
         assert!(
             checks.iter().any(|c| c["name"] == name),
@@ -263,4 +267,106 @@ fn every_shipped_spec_parses_and_validates() {
     }
     assert!(n >= 4);
     moirecast_spec::default_spec().unwrap();
+}
+
+/// A small design that takes a mold: large enough for the gate to sit clear
+/// of the corner keys.
+fn small_mold() -> String {
+    SMALL
+        .replace("width = 4.0", "width = 12.0")
+        .replace("height = 3.0", "height = 10.0")
+        .replace("tolerance = 0.004", "tolerance = 0.01")
+}
+
+#[test]
+fn a_small_mold_builds_with_every_file_and_check() {
+    let dir = scratch("mold");
+    let (ok, err, out) = run_command("mold", &small_mold(), &dir);
+    assert!(ok, "{err}");
+    for f in [
+        "device.stl",
+        "mold-top.stl",
+        "mold-bottom.stl",
+        "assembly.scad",
+        "report.json",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    let report = std::fs::read_to_string(out.join("report.json")).unwrap();
+    for name in [
+        "mold-volumes-sum",
+        "mold-no-overlaps",
+        "cavity-on-device",
+        "cavity-covers-device",
+        "demouldable",
+        "cavity-reachable",
+        "vents-not-below-sprue",
+        "f32-safe-triangles",
+    ] {
+        assert!(
+            report.contains(&format!("\"name\": \"{name}\"")),
+            "check {name} missing"
+        );
+    }
+    assert!(report.contains("\"failed\": []"), "{report}");
+    let scad = std::fs::read_to_string(out.join("assembly.scad")).unwrap();
+    assert!(scad.contains("mode == \"check\"") && scad.contains("exploded"));
+    // METHOD §7.8: the same spec gives byte-identical files.
+    let again = scratch("mold-again");
+    let (ok, err, out2) = run_command("mold", &small_mold(), &again);
+    assert!(ok, "{err}");
+    for f in [
+        "device.stl",
+        "mold-top.stl",
+        "mold-bottom.stl",
+        "assembly.scad",
+        "report.json",
+    ] {
+        assert!(
+            std::fs::read(out.join(f)).unwrap() == std::fs::read(out2.join(f)).unwrap(),
+            "{f} differs between runs"
+        );
+    }
+}
+
+/// Mold specs that do not fit: (what, [mold] table or edit, words the error must contain).
+const BAD_MOLDS: &[(&str, &str, &[&str])] = &[
+    ("walls thinner than 1 mm", "[mold]\nwall_thickness = 0.5", &["mold.wall_thickness", "thinner than 1 mm"]),
+    ("a gate wider than the wall", "[mold]\ngate_diameter = 2.5", &["gate-fits-wall", "mold.gate_diameter"]),
+    ("keys that would cut the cavity", "[mold]\nkey_diameter = 12.0", &["keys-clear-cavity", "mold.key_diameter"]),
+    (
+        "a vent that cannot reach the top face",
+        "[mold]\nwall_thickness = 2.5\nkey_diameter = 0.5\nkey_height = 0.5\nkey_taper = 0.0\nkey_clearance = 0.0\nsprue_diameter = 0.5\ngate_diameter = 0.5\npour_cone_diameter = 0.5\npour_cone_depth = 1.0\nvent_diameter = 2.4",
+        &["vents-reach-top-face", "mold.vent_diameter"],
+    ),
+    ("a mold parameter out of range", "[mold]\nshrink_scale = 1.5", &["mold.shrink_scale", "[0.9, 1.1]"]),
+];
+
+#[test]
+fn molds_that_do_not_fit_fail_clearly_and_write_nothing() {
+    for (i, (what, table, words)) in BAD_MOLDS.iter().enumerate() {
+        let dir = scratch(&format!("bad-mold-{i}"));
+        let (ok, err, out) = run_command("mold", &format!("{}\n{table}\n", small_mold()), &dir);
+        assert!(!ok, "{what}: accepted");
+        for w in *words {
+            assert!(err.contains(w), "{what}: error lacks `{w}`:\n{err}");
+        }
+        assert!(!out.exists(), "{what}: something was written");
+    }
+}
+
+#[test]
+fn a_surface_that_cannot_release_along_z_is_refused() {
+    let spec = small_mold().replace(
+        "kind = \"saddle\"\nradius = 40.0",
+        "kind = \"cylinder\"\nradius = 6.5",
+    );
+    let dir = scratch("steep");
+    let (ok, err, out) = run_command("mold", &spec, &dir);
+    assert!(!ok, "accepted");
+    assert!(
+        err.contains("release from a two-piece mold along z"),
+        "{err}"
+    );
+    assert!(!out.exists());
 }

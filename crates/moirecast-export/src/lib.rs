@@ -239,3 +239,39 @@ mod chunked_stl {
         assert!(chunked == single, "chunked encoding differs");
     }
 }
+
+/// `assembly.scad`: imports the device and both mold halves with colours.
+/// `exploded` (mm) pulls the halves apart; `mode = "check"` renders the
+/// pairwise intersections of the three parts, which are empty when the
+/// mold is right ("checking solids in OpenSCAD").
+pub fn assembly_scad(title: &str) -> String {
+    format!(
+        r#"// {title}
+// Open in OpenSCAD. Customizer: `exploded` pulls the halves apart;
+// mode = "check" renders the pairwise intersections of the parts: an empty
+// result means no part overlaps another.
+exploded = 0;        // [0:1:80]
+mode = "assembly";   // ["assembly", "check", "top", "bottom", "device"]
+
+module top() {{ import("mold-top.stl", convexity = 10); }}
+module bottom() {{ import("mold-bottom.stl", convexity = 10); }}
+module device() {{ import("device.stl", convexity = 10); }}
+
+if (mode == "check") {{
+    intersection() {{ top(); bottom(); }}
+    intersection() {{ top(); device(); }}
+    intersection() {{ bottom(); device(); }}
+}} else if (mode == "top") {{
+    top();
+}} else if (mode == "bottom") {{
+    bottom();
+}} else if (mode == "device") {{
+    device();
+}} else {{
+    color([0.90, 0.55, 0.20, 0.55]) translate([0, 0, exploded]) top();
+    color([0.25, 0.45, 0.80, 0.55]) translate([0, 0, -exploded]) bottom();
+    color([0.92, 0.92, 0.97, 0.90]) device();
+}}
+"#
+    )
+}

@@ -62,6 +62,58 @@ pub const MIN_ALTITUDE_MM: f64 = 1e-5;
 /// (METHOD §7.1): finite, closed and oriented, one shell of genus 0,
 /// positive volume, no degenerate triangles.
 pub fn solid_checks(mesh: &Mesh) -> Vec<CheckResult> {
+    solid_checks_of_genus(mesh, 0)
+}
+
+/// What a solid must be beyond closed and oriented.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolidSpec {
+    /// Through-holes: 0 for a device; sprue, vents and bolts for a mold half.
+    pub genus: u32,
+    /// Smallest triangle altitude (mm). Our own meshes keep
+    /// [`MIN_ALTITUDE_MM`]; boolean results may hold thinner slivers where
+    /// faces cross at a shallow angle, and are held to
+    /// [`MIN_BOOLEAN_ALTITUDE_MM`] plus the f32 check below.
+    pub min_altitude: f64,
+    /// Every triangle keeps its orientation when its vertices are rounded
+    /// to f32 (as STL stores them).
+    pub f32_safe: bool,
+}
+
+/// Smallest altitude (mm) of a triangle out of a boolean: not degenerate in f64.
+pub const MIN_BOOLEAN_ALTITUDE_MM: f64 = 1e-9;
+
+impl SolidSpec {
+    pub const DEVICE: SolidSpec = SolidSpec {
+        genus: 0,
+        min_altitude: MIN_ALTITUDE_MM,
+        f32_safe: false,
+    };
+    /// A mold half with `genus` through-holes.
+    pub fn boolean_result(genus: u32) -> SolidSpec {
+        SolidSpec {
+            genus,
+            min_altitude: MIN_BOOLEAN_ALTITUDE_MM,
+            f32_safe: true,
+        }
+    }
+}
+
+/// [`solid_checks`] for a solid with `genus` through-holes (a mold half with
+/// its sprue, vents and bolt holes).
+pub fn solid_checks_of_genus(mesh: &Mesh, genus: u32) -> Vec<CheckResult> {
+    solid_checks_for(
+        mesh,
+        SolidSpec {
+            genus,
+            ..SolidSpec::DEVICE
+        },
+    )
+}
+
+/// The solid checks against `spec`.
+pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
+    let genus = spec.genus;
     let mut out = Vec::new();
     let bad_coords = mesh.positions.iter().filter(|p| !p.is_finite()).count();
     out.push(CheckResult::at_most(
@@ -153,13 +205,13 @@ pub fn solid_checks(mesh: &Mesh) -> Vec<CheckResult> {
             mesh.positions.len() - vertices
         ),
     ));
-    let genus = (2 - euler) as f64 / 2.0;
+    let measured_genus = (2 - euler) as f64 / 2.0;
     out.push(CheckResult {
-        name: "genus-0",
-        value: genus,
-        limit: 0.0,
-        unit: "",
-        passed: genus == 0.0,
+        name: "genus",
+        value: measured_genus,
+        limit: genus as f64,
+        unit: "holes",
+        passed: measured_genus == genus as f64,
         detail: format!("Euler characteristic {euler}"),
     });
 
@@ -202,10 +254,28 @@ pub fn solid_checks(mesh: &Mesh) -> Vec<CheckResult> {
         .get(worst)
         .map(|t| mesh.positions[t[0] as usize])
         .unwrap_or_default();
+    if spec.f32_safe {
+        let flipped = mesh
+            .triangles
+            .par_iter()
+            .filter(|t| {
+                let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+                let [fa, fb, fc] = [a, b, c].map(|p| p.as_vec3().as_dvec3());
+                (b - a).cross(c - a).dot((fb - fa).cross(fc - fa)) <= 0.0
+            })
+            .count();
+        out.push(CheckResult::at_most(
+            "f32-safe-triangles",
+            flipped as f64,
+            0.0,
+            "triangles",
+            "triangles that collapse or flip when rounded to f32 (STL)".into(),
+        ));
+    }
     out.push(CheckResult::at_least(
         "no-degenerate-triangles",
         min_alt,
-        MIN_ALTITUDE_MM,
+        spec.min_altitude,
         "mm",
         format!(
             "smallest altitude, at triangle {worst} near ({:.3}, {:.3}, {:.3})",
@@ -226,7 +296,15 @@ pub struct SolidMesh<'a> {
 impl<'a> SolidMesh<'a> {
     /// Runs [`solid_checks`]; the mesh is solid only if all passed.
     pub fn validate(mesh: &'a Mesh) -> (Vec<CheckResult>, Option<SolidMesh<'a>>) {
-        let checks = solid_checks(mesh);
+        Self::validate_for(mesh, SolidSpec::DEVICE)
+    }
+
+    /// [`SolidMesh::validate`] against `spec`.
+    pub fn validate_for(
+        mesh: &'a Mesh,
+        spec: SolidSpec,
+    ) -> (Vec<CheckResult>, Option<SolidMesh<'a>>) {
+        let checks = solid_checks_for(mesh, spec);
         let ok = checks.iter().all(|c| c.passed);
         (checks, ok.then_some(SolidMesh { mesh }))
     }

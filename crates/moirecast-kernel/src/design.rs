@@ -525,7 +525,7 @@ impl Design {
                 radius_param,
                 radius_value,
                 format!(
-                    "the surface slopes {:.1}° and the lenses add {:.1}°: lens flanks reach {flank:.1}°, over the {MAX_FLANK_DEG}° limit (the device must stay a graph over xy, with vertical walls)",
+                    "the surface slopes {:.1}° and the lenses add {:.1}°: lens flanks reach {flank:.1}°, over the {MAX_FLANK_DEG}° limit (the device must stay a graph over xy, with vertical walls, or it cannot release from a two-piece mold along z)",
                     smax.to_degrees(),
                     self.params.lens.afov.max(base_afov).to_degrees() / 2.0
                 ),

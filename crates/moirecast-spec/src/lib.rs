@@ -9,6 +9,7 @@ use moirecast_kernel::{
     profile::SampledProfile, BaseParams, Design, DesignError, DesignParams, LensParams, LensRule,
     Param, PitchSurface, Profile, ProfileMode, Raster,
 };
+use moirecast_mold::{MoldError, MoldParam, MoldParams};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
@@ -36,7 +37,11 @@ surface.kind = \"saddle\", surface.radius = 60 mm; layout 60 × 60 mm, period 0.
 lens.afov = 60°, lens.index = 1.41 (Sylgard 184), lens.rule = \"constant-afov\";
 base.kind = \"dual-lens\", base.a = 0, base.d = \"focal\", base.levels = 1, base.afov = lens.afov;
 profile.kind = \"rings\" (wavelength = min(width, height)/4) unless profile.image is given;
-profile.mode = \"shape\", blur = 1 mm, threshold = 0.5, invert = false; mesh.tolerance = 0.002 mm";
+profile.mode = \"shape\", blur = 1 mm, threshold = 0.5, invert = false; mesh.tolerance = 0.002 mm;
+mold: wall_thickness = 10, gate_diameter = 1.0, sprue_diameter = 3.2, pour_cone_diameter = 7,
+pour_cone_depth = 4, vent_diameter = 0.8, key_diameter = 4, key_height = 2, key_taper = 10°,
+key_clearance = 0.2, bolts = false, bolt_diameter = 3.4, bolt_spacing = 25 (mm),
+shrink_scale = 1.0, flip = false, min_draft = 1°";
 
 #[derive(Debug, Error)]
 pub enum SpecError {
@@ -83,6 +88,39 @@ pub fn key_of(p: Param) -> &'static str {
     }
 }
 
+/// The key of each mold parameter in the spec.
+pub fn mold_key_of(p: MoldParam) -> &'static str {
+    match p {
+        MoldParam::WallThickness => "mold.wall_thickness",
+        MoldParam::GateDiameter => "mold.gate_diameter",
+        MoldParam::SprueDiameter => "mold.sprue_diameter",
+        MoldParam::PourConeDiameter => "mold.pour_cone_diameter",
+        MoldParam::PourConeDepth => "mold.pour_cone_depth",
+        MoldParam::VentDiameter => "mold.vent_diameter",
+        MoldParam::KeyDiameter => "mold.key_diameter",
+        MoldParam::KeyHeight => "mold.key_height",
+        MoldParam::KeyTaper => "mold.key_taper",
+        MoldParam::KeyClearance => "mold.key_clearance",
+        MoldParam::BoltDiameter => "mold.bolt_diameter",
+        MoldParam::BoltSpacing => "mold.bolt_spacing",
+        MoldParam::ShrinkScale => "mold.shrink_scale",
+        MoldParam::MinDraft => "mold.min_draft",
+    }
+}
+
+/// A mold error as the user sees it: parameter errors name their key.
+pub fn describe_mold_error(file: &str, e: &MoldError) -> String {
+    match e {
+        MoldError::Param { param, .. } => format!("spec `{file}`: `{}` = {e}", mold_key_of(*param)),
+        MoldError::DoesNotFit {
+            param: Some(param), ..
+        } => {
+            format!("spec `{file}`: {e} (key `{}`)", mold_key_of(*param))
+        }
+        _ => e.to_string(),
+    }
+}
+
 // ---- the file format ------------------------------------------------------
 
 #[derive(Deserialize, Debug, Default)]
@@ -100,6 +138,8 @@ struct SpecFile {
     profile: ProfileTable,
     #[serde(default)]
     mesh: MeshTable,
+    #[serde(default)]
+    mold: MoldTable,
 }
 
 #[derive(Deserialize, Debug, Clone, Copy, PartialEq)]
@@ -278,6 +318,74 @@ impl Default for MeshTable {
     }
 }
 
+/// `[mold]`: every dimension of the two-piece mold (METHOD §6), in mm and
+/// degrees. Defaults are `MoldParams::default()`.
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields, default)]
+struct MoldTable {
+    wall_thickness: f64,
+    gate_diameter: f64,
+    sprue_diameter: f64,
+    pour_cone_diameter: f64,
+    pour_cone_depth: f64,
+    vent_diameter: f64,
+    key_diameter: f64,
+    key_height: f64,
+    key_taper: f64,
+    key_clearance: f64,
+    bolts: bool,
+    bolt_diameter: f64,
+    bolt_spacing: f64,
+    shrink_scale: f64,
+    flip: bool,
+    min_draft: f64,
+}
+impl Default for MoldTable {
+    fn default() -> Self {
+        let d = MoldParams::default();
+        MoldTable {
+            wall_thickness: d.wall_thickness,
+            gate_diameter: d.gate_diameter,
+            sprue_diameter: d.sprue_diameter,
+            pour_cone_diameter: d.pour_cone_diameter,
+            pour_cone_depth: d.pour_cone_depth,
+            vent_diameter: d.vent_diameter,
+            key_diameter: d.key_diameter,
+            key_height: d.key_height,
+            key_taper: d.key_taper_deg,
+            key_clearance: d.key_clearance,
+            bolts: d.bolts,
+            bolt_diameter: d.bolt_diameter,
+            bolt_spacing: d.bolt_spacing,
+            shrink_scale: d.shrink_scale,
+            flip: d.flip,
+            min_draft: d.min_draft_deg,
+        }
+    }
+}
+impl MoldTable {
+    fn params(&self) -> MoldParams {
+        MoldParams {
+            wall_thickness: self.wall_thickness,
+            gate_diameter: self.gate_diameter,
+            sprue_diameter: self.sprue_diameter,
+            pour_cone_diameter: self.pour_cone_diameter,
+            pour_cone_depth: self.pour_cone_depth,
+            vent_diameter: self.vent_diameter,
+            key_diameter: self.key_diameter,
+            key_height: self.key_height,
+            key_taper_deg: self.key_taper,
+            key_clearance: self.key_clearance,
+            bolts: self.bolts,
+            bolt_diameter: self.bolt_diameter,
+            bolt_spacing: self.bolt_spacing,
+            shrink_scale: self.shrink_scale,
+            flip: self.flip,
+            min_draft_deg: self.min_draft,
+        }
+    }
+}
+
 // ---- loading --------------------------------------------------------------
 
 /// Where images named in a spec come from.
@@ -297,6 +405,9 @@ pub struct Spec {
     /// The profile's source, for reports: "rings", "profiles/horse.png (shape)".
     pub profile_source: String,
     pub material: Option<String>,
+    /// The `[mold]` table, range-checked; fits to the device are checked
+    /// when the mold is built.
+    pub mold: MoldParams,
 }
 
 /// Loads the spec at `path`; images resolve relative to its directory.
@@ -592,7 +703,21 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         tolerance: finite(file, "mesh.tolerance", raw.mesh.tolerance)?,
     };
     let design = Design::new(params).map_err(|e| from_design_error(file, e))?;
+    let mold = raw.mold.params();
+    mold.validate().map_err(|e| match e {
+        MoldError::Param {
+            param,
+            value,
+            problem,
+            fix,
+        } => invalid(file, mold_key_of(param), value, problem, fix),
+        other => SpecError::Syntax {
+            file: file.to_owned(),
+            message: other.to_string(),
+        },
+    })?;
     Ok(Spec {
+        mold,
         design,
         origin: file.to_owned(),
         profile_source,

@@ -1,0 +1,144 @@
+//! The bridge to manifold-rust (a port of Manifold 3.5.4): every operand and
+//! every result has its status checked, because an invalid operand silently
+//! becomes empty.
+
+use crate::error::{MoldError, Result};
+use glam::{DVec2, DVec3};
+use manifold_rust::linalg::Vec3;
+use manifold_rust::manifold::Manifold;
+use manifold_rust::types::{Error, MeshGL64};
+use moirecast_kernel::Mesh;
+
+/// Facets on a full circle of a channel, key or bolt hole: 0.4 % radial
+/// error, and the channels are not optical faces.
+pub const CIRCLE_SEGMENTS: i32 = 48;
+
+/// Fails unless manifold-rust reports `NoError` for `m`.
+pub fn checked(operation: impl Into<String>, m: Manifold) -> Result<Manifold> {
+    match m.status() {
+        Error::NoError => Ok(m),
+        status => Err(MoldError::Boolean {
+            operation: operation.into(),
+            status: format!("{status:?}"),
+        }),
+    }
+}
+
+/// Imports a closed mesh under a freshly reserved original ID, returned
+/// with it; every triangle carries its own index as face ID through the
+/// booleans, so faces of the results can be traced back to it.
+pub fn to_traced_manifold(what: &str, mesh: &Mesh) -> Result<(Manifold, u32)> {
+    let id = Manifold::reserve_ids(1);
+    let m = import(what, mesh, Some(id))?;
+    Ok((m, id))
+}
+
+/// Imports a closed mesh.
+pub fn to_manifold(what: &str, mesh: &Mesh) -> Result<Manifold> {
+    import(what, mesh, None)
+}
+
+fn import(what: &str, mesh: &Mesh, traced: Option<u32>) -> Result<Manifold> {
+    let mut g = MeshGL64::default();
+    g.num_prop = 3;
+    g.vert_properties = mesh.positions.iter().flat_map(|p| p.to_array()).collect();
+    g.tri_verts = mesh
+        .triangles
+        .iter()
+        .flat_map(|t| t.map(u64::from))
+        .collect();
+    if let Some(id) = traced {
+        g.face_id = (0..mesh.triangles.len() as u64).collect();
+        g.run_index = vec![0, g.tri_verts.len() as u64];
+        g.run_original_id = vec![id];
+    }
+    let m = checked(format!("import {what}"), Manifold::from_mesh_gl64(&g))?;
+    if m.num_tri() != mesh.triangles.len() {
+        return Err(MoldError::Boolean {
+            operation: format!("import {what}"),
+            status: format!(
+                "{} triangles became {} (merged or dropped)",
+                mesh.triangles.len(),
+                m.num_tri()
+            ),
+        });
+    }
+    Ok(m)
+}
+
+/// A mesh exported from manifold, with the source of every triangle.
+pub struct Traced {
+    pub mesh: Mesh,
+    /// For each triangle: the original ID of the mesh it came from, and its
+    /// face ID there.
+    pub source: Vec<(u32, u64)>,
+}
+
+pub fn to_mesh(m: &Manifold) -> Traced {
+    let g = m.get_mesh_gl64(0);
+    let np = g.num_prop as usize;
+    let positions = g
+        .vert_properties
+        .chunks(np)
+        .map(|p| DVec3::new(p[0], p[1], p[2]))
+        .collect();
+    let triangles: Vec<[u32; 3]> = g
+        .tri_verts
+        .chunks(3)
+        .map(|t| [t[0] as u32, t[1] as u32, t[2] as u32])
+        .collect();
+    let mut source = vec![(u32::MAX, u64::MAX); triangles.len()];
+    for (r, id) in g.run_original_id.iter().enumerate() {
+        let (a, b) = (g.run_index[r] as usize / 3, g.run_index[r + 1] as usize / 3);
+        for (t, s) in source.iter_mut().enumerate().take(b).skip(a) {
+            *s = (*id, g.face_id.get(t).copied().unwrap_or(u64::MAX));
+        }
+    }
+    Traced {
+        mesh: Mesh {
+            positions,
+            triangles,
+        },
+        source,
+    }
+}
+
+pub fn v3(p: DVec3) -> Vec3 {
+    Vec3::new(p.x, p.y, p.z)
+}
+
+/// An axis-aligned box.
+pub fn cuboid(lo: DVec3, hi: DVec3) -> Result<Manifold> {
+    checked("box", Manifold::cube(v3(hi - lo), false).translate(v3(lo)))
+}
+
+/// A vertical frustum over `axis` from `z0` (radius `r0`) to `z1` (radius `r1`).
+pub fn vertical_frustum(axis: DVec2, z0: f64, z1: f64, r0: f64, r1: f64) -> Result<Manifold> {
+    checked(
+        "vertical channel",
+        Manifold::cylinder(z1 - z0, r0, r1, CIRCLE_SEGMENTS).translate(v3(axis.extend(z0))),
+    )
+}
+
+/// A horizontal cylinder of radius `r` from `from` along the unit xy
+/// direction `dir` for `length`.
+pub fn horizontal_cylinder(from: DVec3, dir: DVec2, length: f64, r: f64) -> Result<Manifold> {
+    let angle = dir.y.atan2(dir.x).to_degrees();
+    checked(
+        "runner",
+        Manifold::cylinder(length, r, r, CIRCLE_SEGMENTS)
+            .rotate(0.0, 90.0, 0.0)
+            .rotate(0.0, 0.0, angle)
+            .translate(v3(from)),
+    )
+}
+
+pub fn union_all(what: &str, parts: Vec<Manifold>) -> Result<Manifold> {
+    if parts.is_empty() {
+        return Ok(Manifold::empty());
+    }
+    checked(
+        what,
+        Manifold::batch_boolean(&parts, manifold_rust::types::OpType::Add),
+    )
+}

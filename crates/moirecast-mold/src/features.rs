@@ -1,0 +1,659 @@
+//! Where the mold's features go (METHOD §6): gate and runner, sprue and pour
+//! cone, vents at the ceiling's maxima, registration keys, bolt holes. Each
+//! placement is checked against the device and the block here, before any
+//! boolean runs, so a misfit is an error that names the parameter and place.
+
+use crate::error::{MoldError, MoldParam, Result};
+use crate::params::{MoldParams, MIN_WALL_MM};
+use crate::parting::{HeightQuery, PosedDevice, Rect, Wall, WallCurves};
+use glam::{DVec2, DVec3};
+use moirecast_kernel::Design;
+
+/// Grid nodes per side for finding the ceiling's maxima and the gate.
+const SURVEY_NODES: usize = 65;
+/// Gap (mm) kept between the runner and the wall's top and bottom edges.
+const GATE_EDGE_GAP_MM: f64 = 0.05;
+/// How far (mm) the runner reaches into the cavity, so the two touch in a
+/// volume, not along a face.
+const RUNNER_INTO_CAVITY_MM: f64 = 0.02;
+
+/// The gate on the device's wall at the parting line, the runner that feeds
+/// it and the sprue above the runner's far end.
+#[derive(Clone, Debug)]
+pub struct Gate {
+    pub wall: Wall,
+    /// Centre of the gate: on the wall, at the mid-wall height.
+    pub at: DVec3,
+    pub radius: f64,
+    /// Where the runner meets the sprue's axis.
+    pub sprue_axis: DVec2,
+    pub sprue_radius: f64,
+    /// The sprue runs from here (the runner's floor) to the top face.
+    pub sprue_bottom_z: f64,
+    pub cone_radius: f64,
+    pub cone_depth: f64,
+}
+
+/// Where a vent attaches to the cavity.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VentPlace {
+    /// At the top of a wall: the stub is on the wall, off the optics.
+    Wall(Wall),
+    /// At a corner of the outline.
+    Corner,
+    /// Inside the outline: the stub is on the lenses.
+    Lenses,
+}
+
+#[derive(Clone, Debug)]
+pub struct Vent {
+    /// The ceiling maximum this vent serves.
+    pub maximum: DVec3,
+    pub place: VentPlace,
+    pub axis: DVec2,
+    pub radius: f64,
+    /// Bottom of the vent column; it rises to the top face.
+    pub foot_z: f64,
+}
+
+/// A registration key: a tapered bump on the bottom half's skirt and a
+/// socket with clearance in the top half.
+#[derive(Clone, Debug)]
+pub struct Key {
+    /// Centre of the key's base, on the skirt.
+    pub at: DVec3,
+}
+
+/// Everything placed, in the mold frame.
+#[derive(Clone, Debug)]
+pub struct Features {
+    pub block_lo: DVec3,
+    pub block_hi: DVec3,
+    pub gate: Gate,
+    pub vents: Vec<Vent>,
+    pub keys: Vec<Key>,
+    pub bolts: Vec<DVec2>,
+    pub warnings: Vec<String>,
+}
+
+fn misfit(
+    check: &'static str,
+    param: Option<MoldParam>,
+    at: DVec3,
+    problem: String,
+    fix: String,
+) -> MoldError {
+    MoldError::DoesNotFit {
+        check,
+        param,
+        at,
+        problem,
+        fix,
+    }
+}
+
+/// A smooth (lens-ripple-free) surface of the posed device on a grid over
+/// the layout: the crease surfaces, where the lenses start.
+struct Survey {
+    /// points[j][i], in the mold frame.
+    points: Vec<Vec<DVec3>>,
+}
+
+impl Survey {
+    fn new(design: &Design, device: &PosedDevice, surface: impl Fn(f64, f64) -> DVec3) -> Self {
+        let (w, h) = (design.params.width, design.params.height);
+        let n = SURVEY_NODES;
+        let points = (0..n)
+            .map(|j| {
+                let v = -h / 2.0 + h * j as f64 / (n - 1) as f64;
+                (0..n)
+                    .map(|i| {
+                        let u = -w / 2.0 + w * i as f64 / (n - 1) as f64;
+                        device.pose(surface(u, v))
+                    })
+                    .collect()
+            })
+            .collect();
+        Survey { points }
+    }
+
+    /// The wall a border node lies on (corners: None).
+    fn border(&self, i: usize, j: usize) -> Option<Option<Wall>> {
+        let last = SURVEY_NODES - 1;
+        let on_x = i == 0 || i == last;
+        let on_y = j == 0 || j == last;
+        match (on_x, on_y) {
+            (false, false) => None,
+            (true, true) => Some(None),
+            _ => {
+                // Which wall in the mold frame: read it off the posed point.
+                Some(Some(if on_x {
+                    let (a, b) = (self.points[j][0].x, self.points[j][last].x);
+                    if (self.points[j][i].x - a.min(b)).abs()
+                        < (self.points[j][i].x - a.max(b)).abs()
+                    {
+                        Wall::XMin
+                    } else {
+                        Wall::XMax
+                    }
+                } else {
+                    let (a, b) = (self.points[0][i].y, self.points[last][i].y);
+                    if (self.points[j][i].y - a.min(b)).abs()
+                        < (self.points[j][i].y - a.max(b)).abs()
+                    {
+                        Wall::YMin
+                    } else {
+                        Wall::YMax
+                    }
+                }))
+            }
+        }
+    }
+}
+
+/// Places and checks every feature.
+pub fn place(
+    design: &Design,
+    device: &PosedDevice,
+    walls: &[WallCurves],
+    upper: &HeightQuery,
+    lower: &HeightQuery,
+    p: &MoldParams,
+) -> Result<Features> {
+    let outline = device.outline;
+    let (lo, hi) = device.mesh.bounds();
+    let tw = p.wall_thickness;
+    let block_lo = DVec3::new(outline.x0 - tw, outline.y0 - tw, lo.z - tw);
+    let block_hi = DVec3::new(outline.x1 + tw, outline.y1 + tw, hi.z + tw);
+    let block = outline.grown(tw);
+    let curve = |w: Wall| walls.iter().find(|c| c.wall == w).expect("four walls");
+    let mut warnings = Vec::new();
+
+    // Ceiling (the crease surface under the top half) and the smooth mid
+    // surface, free of the ripple of single lenses.
+    let revealer = |u: f64, v: f64| design.surface().point(u, v);
+    let base = |u: f64, v: f64| design.base_surface(u, v);
+    let ceiling = if device.flip {
+        Survey::new(design, device, base)
+    } else {
+        Survey::new(design, device, revealer)
+    };
+    let mid = Survey::new(design, device, |u, v| 0.5 * (revealer(u, v) + base(u, v)));
+
+    // --- Keys, at the middle of each corner square of the skirt.
+    let socket_r = p.key_diameter / 2.0 + p.key_clearance;
+    let corner_mid = |w: Wall, end: bool| {
+        let c = &curve(w).mid;
+        if end {
+            *c.z.last().unwrap()
+        } else {
+            c.z[0]
+        }
+    };
+    let keys: Vec<Key> = [
+        (
+            DVec2::new(outline.x0 - tw / 2.0, outline.y0 - tw / 2.0),
+            corner_mid(Wall::YMin, false),
+        ),
+        (
+            DVec2::new(outline.x1 + tw / 2.0, outline.y0 - tw / 2.0),
+            corner_mid(Wall::YMin, true),
+        ),
+        (
+            DVec2::new(outline.x1 + tw / 2.0, outline.y1 + tw / 2.0),
+            corner_mid(Wall::YMax, true),
+        ),
+        (
+            DVec2::new(outline.x0 - tw / 2.0, outline.y1 + tw / 2.0),
+            corner_mid(Wall::YMax, false),
+        ),
+    ]
+    .into_iter()
+    .map(|(xy, z)| Key { at: xy.extend(z) })
+    .collect();
+
+    // Keys must stay clear of the cavity, the outside and the block faces.
+    for k in &keys {
+        let xy = k.at.truncate();
+        let to_cavity = outline.signed_distance(xy) - socket_r;
+        let to_outside = -block.signed_distance(xy) - socket_r;
+        if to_cavity < MIN_WALL_MM || to_outside < MIN_WALL_MM {
+            return Err(misfit(
+                "keys-clear-cavity",
+                Some(MoldParam::KeyDiameter),
+                k.at,
+                format!(
+                    "a key socket {:.1} mm wide here comes {:.2} mm from the cavity and {:.2} mm from the block's side (at least {MIN_WALL_MM} mm needed)",
+                    2.0 * socket_r,
+                    to_cavity,
+                    to_outside
+                ),
+                format!(
+                    "make mold.key_diameter at most {:.1} mm or mold.wall_thickness larger",
+                    (tw - 2.0 * MIN_WALL_MM - 2.0 * p.key_clearance).max(0.0)
+                ),
+            ));
+        }
+        let socket_top = k.at.z + p.key_height + p.key_clearance;
+        let bump_bottom = k.at.z - 0.5 * p.key_height;
+        if block_hi.z - socket_top < MIN_WALL_MM || bump_bottom - block_lo.z < MIN_WALL_MM {
+            return Err(misfit(
+                "keys-clear-cavity",
+                Some(MoldParam::KeyHeight),
+                k.at,
+                "the key is too tall for the block's height here".into(),
+                "make mold.key_height smaller or mold.wall_thickness larger".into(),
+            ));
+        }
+    }
+
+    // --- Gate: the lowest point of the smooth mid-wall curve, away from the
+    // corners (where the keys are). Ties go to the point nearest a wall's middle.
+    let (r_g, r_s, r_c) = (
+        p.gate_diameter / 2.0,
+        p.sprue_diameter / 2.0,
+        p.pour_cone_diameter / 2.0,
+    );
+    let keepout = (r_c + socket_r + MIN_WALL_MM - tw / 2.0).max(r_g + MIN_WALL_MM);
+    let n = SURVEY_NODES;
+    let mut best: Option<(f64, f64, Wall, f64)> = None; // (z, distance to wall middle, wall, t)
+    for j in 0..n {
+        for i in 0..n {
+            let Some(Some(wall)) = mid.border(i, j) else {
+                continue;
+            };
+            let q = mid.points[j][i];
+            let (s0, s1) = wall.span(&outline);
+            let t = wall.along(q).clamp(s0, s1);
+            if t < s0 + keepout || t > s1 - keepout {
+                continue;
+            }
+            let key = (q.z, (t - 0.5 * (s0 + s1)).abs(), wall, t);
+            let better = match best {
+                None => true,
+                Some(b) => {
+                    key.0 < b.0 - 1e-6 || ((key.0 - b.0).abs() <= 1e-6 && key.1 < b.1 - 1e-9)
+                }
+            };
+            if better {
+                best = Some(key);
+            }
+        }
+    }
+    let Some((_, _, gate_wall, t_g)) = best else {
+        return Err(misfit(
+            "gate-fits-wall",
+            Some(MoldParam::WallThickness),
+            outline.centre().extend(0.0),
+            format!("no wall is long enough to take a gate {keepout:.1} mm or more from its corner keys"),
+            "make the device larger, or the pour cone and keys smaller".into(),
+        ));
+    };
+    let wc = curve(gate_wall);
+    let m_g = wc.mid.eval(t_g);
+    let at = gate_wall.point(&outline, t_g, m_g);
+    let (top_min, _) = wc.upper.range(t_g - r_g, t_g + r_g);
+    let (_, bottom_max) = wc.lower.range(t_g - r_g, t_g + r_g);
+    let room = (top_min - m_g).min(m_g - bottom_max) - GATE_EDGE_GAP_MM;
+    if r_g > room {
+        return Err(misfit(
+            "gate-fits-wall",
+            Some(MoldParam::GateDiameter),
+            at,
+            format!(
+                "a gate {} mm wide does not fit the {} wall, which is {:.3} mm high there",
+                p.gate_diameter,
+                gate_wall.name(),
+                top_min - bottom_max
+            ),
+            format!(
+                "set mold.gate_diameter to at most {:.2} mm",
+                (2.0 * room).max(0.0)
+            ),
+        ));
+    }
+    let out = gate_wall.outward();
+    let sprue_axis = at.truncate() + out * (tw / 2.0);
+    if tw / 2.0 - r_s < MIN_WALL_MM {
+        return Err(misfit(
+            "sprue-fits-wall",
+            Some(MoldParam::SprueDiameter),
+            sprue_axis.extend(m_g),
+            format!(
+                "a sprue {} mm wide in the middle of a {tw} mm wall leaves less than {MIN_WALL_MM} mm to the cavity and the outside",
+                p.sprue_diameter
+            ),
+            format!("make mold.wall_thickness at least {:.1} mm or the sprue narrower", 2.0 * (r_s + MIN_WALL_MM)),
+        ));
+    }
+    if tw / 2.0 - r_c < MIN_WALL_MM - 1e-12 {
+        return Err(misfit(
+            "sprue-fits-wall",
+            Some(MoldParam::PourConeDiameter),
+            sprue_axis.extend(block_hi.z),
+            format!(
+                "a pour cone {} mm wide leaves less than {MIN_WALL_MM} mm to the block's side",
+                p.pour_cone_diameter
+            ),
+            format!(
+                "set mold.pour_cone_diameter to at most {:.1} mm",
+                tw - 2.0 * MIN_WALL_MM
+            ),
+        ));
+    }
+    let cone_floor = block_hi.z - p.pour_cone_depth;
+    if cone_floor - hi.z < MIN_WALL_MM {
+        return Err(misfit(
+            "sprue-fits-wall",
+            Some(MoldParam::PourConeDepth),
+            sprue_axis.extend(cone_floor),
+            "the pour cone reaches within 1 mm of the cavity's height".into(),
+            "make the pour cone shallower or the walls thicker".into(),
+        ));
+    }
+    let gate = Gate {
+        wall: gate_wall,
+        at,
+        radius: r_g,
+        sprue_axis,
+        sprue_radius: r_s,
+        sprue_bottom_z: m_g - r_g,
+        cone_radius: r_c,
+        cone_depth: p.pour_cone_depth,
+    };
+
+    // --- Vents at the ceiling's local maxima (ties form plateaus: one vent each).
+    let r_v = p.vent_diameter / 2.0;
+    let overlap = r_v / 2.0;
+    let z = |i: usize, j: usize| ceiling.points[j][i].z;
+    let span_z = {
+        let all = ceiling.points.iter().flatten().map(|q| q.z);
+        let (a, b) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), z| {
+            (a.min(z), b.max(z))
+        });
+        b - a
+    };
+    let tie = 1e-9 * (1.0 + span_z);
+    let neighbours = |i: usize, j: usize| {
+        let mut out = Vec::with_capacity(8);
+        for dj in -1i64..=1 {
+            for di in -1i64..=1 {
+                let (ni, nj) = (i as i64 + di, j as i64 + dj);
+                if (di, dj) != (0, 0)
+                    && ni >= 0
+                    && nj >= 0
+                    && (ni as usize) < n
+                    && (nj as usize) < n
+                {
+                    out.push((ni as usize, nj as usize));
+                }
+            }
+        }
+        out
+    };
+    let is_max = |i: usize, j: usize| {
+        neighbours(i, j)
+            .iter()
+            .all(|&(a, b)| z(a, b) <= z(i, j) + tie)
+    };
+    let mut component = vec![usize::MAX; n * n];
+    let mut plateaus: Vec<Vec<(usize, usize)>> = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            if component[j * n + i] != usize::MAX || !is_max(i, j) {
+                continue;
+            }
+            let id = plateaus.len();
+            let mut members = vec![(i, j)];
+            component[j * n + i] = id;
+            let mut k = 0;
+            while k < members.len() {
+                let (a, b) = members[k];
+                for (c, d) in neighbours(a, b) {
+                    if component[d * n + c] == usize::MAX
+                        && (z(c, d) - z(a, b)).abs() <= tie
+                        && is_max(c, d)
+                    {
+                        component[d * n + c] = id;
+                        members.push((c, d));
+                    }
+                }
+                k += 1;
+            }
+            plateaus.push(members);
+        }
+    }
+    let mut vents: Vec<Vent> = Vec::new();
+    for members in plateaus {
+        // A plateau that reaches the outline is vented there, as far from
+        // the gate as it can be; otherwise at its highest node.
+        let on_border: Vec<_> = members
+            .iter()
+            .filter(|&&(i, j)| ceiling.border(i, j).is_some())
+            .copied()
+            .collect();
+        let (i, j) = if on_border.is_empty() {
+            *members
+                .iter()
+                .max_by(|a, b| z(a.0, a.1).total_cmp(&z(b.0, b.1)))
+                .expect("non-empty plateau")
+        } else {
+            *on_border
+                .iter()
+                .max_by(|a, b| {
+                    let da = ceiling.points[a.1][a.0]
+                        .truncate()
+                        .distance(gate.at.truncate());
+                    let db = ceiling.points[b.1][b.0]
+                        .truncate()
+                        .distance(gate.at.truncate());
+                    da.total_cmp(&db)
+                })
+                .expect("non-empty border")
+        };
+        let q = ceiling.points[j][i];
+        let clamped = DVec2::new(
+            q.x.clamp(outline.x0, outline.x1),
+            q.y.clamp(outline.y0, outline.y1),
+        );
+        let vent = match ceiling.border(i, j) {
+            Some(Some(wall)) => {
+                let c = curve(wall);
+                let t = wall.along(clamped.extend(0.0));
+                let foot = 0.5 * (c.mid.eval(t) + c.upper.eval(t));
+                let on = wall.point(&outline, t, foot).truncate();
+                Vent {
+                    maximum: q,
+                    place: VentPlace::Wall(wall),
+                    axis: on + wall.outward() * (r_v - overlap),
+                    radius: r_v,
+                    foot_z: foot,
+                }
+            }
+            Some(None) => {
+                let corner = DVec2::new(
+                    if clamped.x - outline.x0 < outline.x1 - clamped.x {
+                        outline.x0
+                    } else {
+                        outline.x1
+                    },
+                    if clamped.y - outline.y0 < outline.y1 - clamped.y {
+                        outline.y0
+                    } else {
+                        outline.y1
+                    },
+                );
+                let wall = if corner.y == outline.y0 {
+                    Wall::YMin
+                } else {
+                    Wall::YMax
+                };
+                let c = curve(wall);
+                let t = corner.x;
+                let foot = 0.5 * (c.mid.eval(t) + c.upper.eval(t));
+                let dir = (corner - outline.centre()).signum() * std::f64::consts::FRAC_1_SQRT_2;
+                Vent {
+                    maximum: q,
+                    place: VentPlace::Corner,
+                    axis: corner + dir * (r_v - overlap),
+                    radius: r_v,
+                    foot_z: foot,
+                }
+            }
+            None => {
+                let (top, bottom) = (upper.height(clamped), lower.height(clamped));
+                let (Some(top), Some(bottom)) = (top, bottom) else {
+                    return Err(MoldError::NotSolid {
+                        what: "device",
+                        detail: format!("no device above ({:.3}, {:.3})", clamped.x, clamped.y),
+                    });
+                };
+                warnings.push(format!(
+                    "the cavity's ceiling has a maximum inside the outline at ({:.2}, {:.2}) mm: its vent leaves a {:.1} mm stub on the lenses{}",
+                    clamped.x,
+                    clamped.y,
+                    p.vent_diameter,
+                    if p.flip { "" } else { "; set mold.flip = true to mould the device upside down" }
+                ));
+                Vent {
+                    maximum: q,
+                    place: VentPlace::Lenses,
+                    axis: clamped,
+                    radius: r_v,
+                    foot_z: 0.5 * (top + bottom),
+                }
+            }
+        };
+        // Plateaus next to each other share a vent.
+        if vents
+            .iter()
+            .any(|v| v.axis.distance(vent.axis) < 2.0 * r_v + MIN_WALL_MM)
+        {
+            continue;
+        }
+        vents.push(vent);
+    }
+
+    // Every vent column must rise to the top face inside the block and clear
+    // of the sprue, the pour cone and the key sockets.
+    for v in &vents {
+        let at = v.axis.extend(v.foot_z);
+        let side_gap = -block.signed_distance(v.axis) - v.radius;
+        if side_gap < MIN_WALL_MM {
+            return Err(misfit(
+                "vents-reach-top-face",
+                Some(MoldParam::VentDiameter),
+                at,
+                format!(
+                    "a vent {} mm wide here passes {side_gap:.2} mm from the block's side on its way to the top face (at least {MIN_WALL_MM} mm needed)",
+                    p.vent_diameter
+                ),
+                "make mold.vent_diameter smaller or mold.wall_thickness larger".into(),
+            ));
+        }
+        let sprue_gap = v.axis.distance(gate.sprue_axis) - v.radius - r_c;
+        if sprue_gap < MIN_WALL_MM {
+            return Err(misfit(
+                "vents-reach-top-face",
+                Some(MoldParam::VentDiameter),
+                at,
+                format!(
+                    "the vent column runs into the sprue and pour cone ({sprue_gap:.2} mm apart)"
+                ),
+                "make the vents or the pour cone narrower".into(),
+            ));
+        }
+        for k in &keys {
+            let gap = v.axis.distance(k.at.truncate()) - v.radius - socket_r;
+            if gap < MIN_WALL_MM {
+                return Err(misfit(
+                    "vents-reach-top-face",
+                    Some(MoldParam::VentDiameter),
+                    at,
+                    format!("the vent column runs into a key socket ({gap:.2} mm apart)"),
+                    "make the vents or the keys smaller".into(),
+                ));
+            }
+        }
+    }
+
+    for k in &keys {
+        let xy = k.at.truncate();
+        let gap = xy.distance(gate.sprue_axis) - socket_r - r_c;
+        if gap < MIN_WALL_MM {
+            return Err(misfit(
+                "keys-clear-cavity",
+                Some(MoldParam::KeyDiameter),
+                k.at,
+                format!("the key socket runs into the sprue ({gap:.2} mm apart)"),
+                "make the keys or the pour cone smaller".into(),
+            ));
+        }
+    }
+
+    // --- Bolt holes along the rim's middle line, between the keys.
+    let mut bolts = Vec::new();
+    if p.bolts {
+        let r_b = p.bolt_diameter / 2.0;
+        if tw / 2.0 - r_b < MIN_WALL_MM {
+            return Err(misfit(
+                "bolts-fit-rim",
+                Some(MoldParam::BoltDiameter),
+                keys[0].at,
+                format!(
+                    "bolt holes {} mm wide leave less than {MIN_WALL_MM} mm in a {tw} mm rim",
+                    p.bolt_diameter
+                ),
+                format!(
+                    "make mold.wall_thickness at least {:.1} mm",
+                    2.0 * (r_b + MIN_WALL_MM)
+                ),
+            ));
+        }
+        for k in 0..4 {
+            let (a, b) = (keys[k].at.truncate(), keys[(k + 1) % 4].at.truncate());
+            let pieces = (a.distance(b) / p.bolt_spacing).ceil().max(1.0) as usize;
+            for s in 1..pieces {
+                let q = a + (b - a) * (s as f64 / pieces as f64);
+                let clear = q.distance(gate.sprue_axis) - r_c - r_b >= MIN_WALL_MM
+                    && vents
+                        .iter()
+                        .all(|v| q.distance(v.axis) - v.radius - r_b >= MIN_WALL_MM)
+                    && keys
+                        .iter()
+                        .all(|k| q.distance(k.at.truncate()) - socket_r - r_b >= MIN_WALL_MM);
+                if clear {
+                    bolts.push(q);
+                }
+            }
+        }
+    }
+
+    Ok(Features {
+        block_lo,
+        block_hi,
+        gate,
+        vents,
+        keys,
+        bolts,
+        warnings,
+    })
+}
+
+/// The runner from just inside the cavity to the sprue's axis.
+pub fn runner_span(gate: &Gate) -> (DVec3, DVec2, f64) {
+    let dir = (gate.sprue_axis - gate.at.truncate()).normalize();
+    let from = gate.at - (dir * RUNNER_INTO_CAVITY_MM).extend(0.0);
+    let length = gate.at.truncate().distance(gate.sprue_axis) + RUNNER_INTO_CAVITY_MM;
+    (from, dir, length)
+}
+
+/// The block's footprint rectangle.
+pub fn block_rect(f: &Features) -> Rect {
+    Rect {
+        x0: f.block_lo.x,
+        x1: f.block_hi.x,
+        y0: f.block_lo.y,
+        y1: f.block_hi.y,
+    }
+}

@@ -1,0 +1,455 @@
+//! Two-piece casting molds around a moirecast device (METHOD §6), and the
+//! mold invariants of METHOD §7 measured on the result.
+//!
+//! The mold is built in the mold frame: the device posed (flipped and
+//! scaled against shrinkage), a block around it, a parting surface, and
+//! channels and keys placed and checked before any boolean runs. Booleans are
+//! manifold-rust's; every operand and result has its status checked. No I/O.
+
+pub mod boolean;
+pub mod error;
+pub mod features;
+pub mod params;
+pub mod parting;
+
+pub use error::{MoldError, MoldParam, Result};
+pub use features::{Features, Gate, Key, Vent, VentPlace};
+pub use params::{MoldParams, MIN_WALL_MM};
+
+use boolean::{
+    checked, cuboid, horizontal_cylinder, to_manifold, to_mesh, union_all, vertical_frustum,
+};
+use glam::{DVec2, DVec3};
+use manifold_rust::manifold::Manifold;
+use moirecast_kernel::check::{solid_checks_for, solid_checks_of_genus, CheckResult, SolidSpec};
+use moirecast_kernel::progress::Progress;
+use moirecast_kernel::{Design, DeviceMesh, Mesh};
+use parting::{Face, HeightQuery, PosedDevice};
+use rayon::prelude::*;
+
+/// Mold volumes sum to the block's to this relative error (METHOD §7.4).
+pub const VOLUME_SUM_REL: f64 = 1e-6;
+/// Largest overlap (mm³) between parts that rounding can explain (METHOD §7.5).
+pub const OVERLAP_MM3: f64 = 1e-4;
+/// Cavity faces lie on the device's faces to this distance (mm): far below
+/// any tolerance, so the cavity is within tolerance of the exact surface
+/// exactly when the device mesh is (METHOD §7.6).
+pub const CAVITY_ON_DEVICE_MM: f64 = 1e-6;
+/// Edges shorter than this (mm) that the booleans leave where the parting
+/// surface meets the device's walls are collapsed: far below any tolerance,
+/// and long enough that no triangle can flip when written as f32 STL.
+const SLIVER_MM: f64 = 1e-5;
+/// Bound on an opening's area on the device over its circle's area.
+const OPENING_SLACK: f64 = 1.5;
+/// How far (mm) the parting region and through-channels reach past the block.
+const PAST_BLOCK_MM: f64 = 1.0;
+/// Spacing (mm) of the parting surface's grid inside the outline.
+const PARTING_CELL_MM: f64 = 1.0;
+
+/// The worst draft of a half's cavity against its draw direction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Draft {
+    /// asin(n·draw) of the worst lens face, in degrees: 90° for a face square
+    /// to the draw direction, 0° for a vertical face, negative for an overhang.
+    pub degrees: f64,
+    pub at: DVec3,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Volumes {
+    pub block: f64,
+    pub top: f64,
+    pub bottom: f64,
+    pub device: f64,
+    /// Channels, bolt holes and key clearances inside the block.
+    pub voids: f64,
+}
+
+/// A built mold, measured.
+pub struct Mold {
+    /// The cavity's shape: the device in the mold frame (flipped, scaled).
+    pub device: Mesh,
+    pub top: Mesh,
+    pub bottom: Mesh,
+    pub features: Features,
+    pub volumes: Volumes,
+    pub draft_top: Draft,
+    pub draft_bottom: Draft,
+    /// Through-holes (genus) of each half: sprue, vents and bolts in the
+    /// top; bolts in the bottom.
+    pub genus_top: u32,
+    pub genus_bottom: u32,
+    pub parting_triangles: usize,
+    /// Every invariant of METHOD §7 that concerns the mold, measured.
+    pub checks: Vec<CheckResult>,
+}
+
+/// Worst draft of the faces of one kind against `draw` (±z).
+fn worst_draft(device: &PosedDevice, kind: Face, draw: f64) -> Draft {
+    device
+        .mesh
+        .triangles
+        .par_iter()
+        .zip(&device.faces)
+        .filter(|(_, f)| **f == kind)
+        .map(|(t, _)| {
+            let [a, b, c] = t.map(|i| device.mesh.positions[i as usize]);
+            let n = (b - a).cross(c - a).normalize();
+            Draft {
+                degrees: (n.z * draw).clamp(-1.0, 1.0).asin().to_degrees(),
+                at: (a + b + c) / 3.0,
+            }
+        })
+        .reduce(
+            || Draft {
+                degrees: f64::INFINITY,
+                at: DVec3::ZERO,
+            },
+            |x, y| {
+                if y.degrees < x.degrees
+                    || (y.degrees == x.degrees && (y.at.x, y.at.y) < (x.at.x, x.at.y))
+                {
+                    y
+                } else {
+                    x
+                }
+            },
+        )
+}
+
+/// Builds the two-piece mold of `device` (a mesh of `design`) and measures
+/// it. Misfits of the parameters to this device are errors; failed
+/// invariants are returned in `checks` for the caller to act on.
+pub fn build_mold(
+    design: &Design,
+    device: &DeviceMesh,
+    p: &MoldParams,
+    progress: &dyn Progress,
+) -> Result<Mold> {
+    p.validate()?;
+    progress.stage("placing mold features", 1);
+    let posed = PosedDevice::new(design, device, p.flip, p.shrink_scale)?;
+    let draft_top = worst_draft(&posed, Face::Upper, 1.0);
+    let draft_bottom = worst_draft(&posed, Face::Lower, -1.0);
+    for d in [draft_top, draft_bottom] {
+        if d.degrees < p.min_draft_deg {
+            return Err(MoldError::DoesNotFit {
+                check: "releases-along-z",
+                param: Some(MoldParam::MinDraft),
+                at: d.at,
+                problem: format!(
+                    "a lens face has a draft of {:.2}° against its half's draw direction (at least {}° needed): the device cannot release along z",
+                    d.degrees, p.min_draft_deg
+                ),
+                fix: "reduce the surface's slope or curvature, or the lens AFOV".into(),
+            });
+        }
+    }
+    let walls = parting::wall_curves(&posed)?;
+    let upper_q = HeightQuery::new(
+        &posed.mesh,
+        (0..posed.faces.len()).filter(|&t| posed.faces[t] == Face::Upper),
+    );
+    let lower_q = HeightQuery::new(
+        &posed.mesh,
+        (0..posed.faces.len()).filter(|&t| posed.faces[t] == Face::Lower),
+    );
+    let f = features::place(design, &posed, &walls, &upper_q, &lower_q, p)?;
+    progress.tick(1);
+
+    progress.stage("building the parting surface", 1);
+    let o = posed.outline;
+    let cells = (
+        (((o.x1 - o.x0) / PARTING_CELL_MM).ceil() as usize).clamp(4, 128),
+        (((o.y1 - o.y0) / PARTING_CELL_MM).ceil() as usize).clamp(4, 128),
+    );
+    let interior_mid = |q: DVec2| match (upper_q.height(q), lower_q.height(q)) {
+        (Some(a), Some(b)) => 0.5 * (a + b),
+        _ => f64::NAN,
+    };
+    let region = parting::upper_region(
+        &o,
+        &walls,
+        &interior_mid,
+        cells,
+        &features::block_rect(&f).grown(PAST_BLOCK_MM),
+        f.block_hi.z + PAST_BLOCK_MM,
+    );
+    if let Some(c) = solid_checks_of_genus(&region, 0)
+        .into_iter()
+        .find(|c| !c.passed)
+    {
+        return Err(MoldError::NotSolid {
+            what: "parting region",
+            detail: format!("{}: {} ({})", c.name, c.value, c.detail),
+        });
+    }
+    progress.tick(1);
+
+    progress.stage("mold booleans", 1);
+    let (dev, device_id) = boolean::to_traced_manifold("device", &posed.mesh)?;
+    let upper = to_manifold("parting region", &region)?;
+    let block = cuboid(f.block_lo, f.block_hi)?;
+    let above = f.block_hi.z + PAST_BLOCK_MM;
+    let g = &f.gate;
+    let (from, dir, length) = features::runner_span(g);
+    let mut fill = vec![
+        horizontal_cylinder(from, dir, length, g.radius)?,
+        vertical_frustum(
+            g.sprue_axis,
+            g.sprue_bottom_z,
+            above,
+            g.sprue_radius,
+            g.sprue_radius,
+        )?,
+        {
+            let floor = f.block_hi.z - g.cone_depth;
+            let r_top = g.sprue_radius
+                + (g.cone_radius - g.sprue_radius) * (above - floor) / g.cone_depth.max(1e-9);
+            if g.cone_depth > 0.0 {
+                vertical_frustum(g.sprue_axis, floor, above, g.sprue_radius, r_top)?
+            } else {
+                Manifold::empty()
+            }
+        },
+    ];
+    for v in &f.vents {
+        fill.push(vertical_frustum(
+            v.axis, v.foot_z, above, v.radius, v.radius,
+        )?);
+    }
+    let fill = union_all("runner, sprue and vents", fill)?;
+    let bolts = union_all(
+        "bolt holes",
+        f.bolts
+            .iter()
+            .map(|&b| {
+                vertical_frustum(
+                    b,
+                    f.block_lo.z - PAST_BLOCK_MM,
+                    above,
+                    p.bolt_diameter / 2.0,
+                    p.bolt_diameter / 2.0,
+                )
+            })
+            .collect::<Result<_>>()?,
+    )?;
+    let tan = p.key_taper_deg.to_radians().tan();
+    let (h, c) = (p.key_height, p.key_clearance);
+    let r_low = p.key_diameter / 2.0 + 0.5 * h * tan;
+    let mut bumps = Vec::new();
+    let mut sockets = Vec::new();
+    for k in &f.keys {
+        let (xy, z) = (k.at.truncate(), k.at.z);
+        bumps.push(vertical_frustum(
+            xy,
+            z - 0.5 * h,
+            z + h,
+            r_low,
+            r_low - 1.5 * h * tan,
+        )?);
+        sockets.push(vertical_frustum(
+            xy,
+            z - 0.5 * h,
+            z + h + c,
+            r_low + c,
+            r_low + c - (1.5 * h + c) * tan,
+        )?);
+    }
+    let bumps = union_all("key bumps", bumps)?;
+    let sockets = union_all("key sockets", sockets)?;
+    let channels = checked("channels", fill.union(&bolts))?;
+    let top_block = checked(
+        "block above the parting surface",
+        block.intersection(&upper),
+    )?;
+    let top_block = checked(
+        "top half before the cavity",
+        top_block.difference(&checked("channels and sockets", channels.union(&sockets))?),
+    )?;
+    let bottom_block = checked("block below the parting surface", block.difference(&upper))?;
+    let bottom_block = checked(
+        "bottom half before the cavity",
+        bottom_block.union(&bumps).difference(&channels),
+    )?;
+    let (top, bottom) = rayon::join(
+        || checked("top half", top_block.difference(&dev).simplify(SLIVER_MM)),
+        || {
+            checked(
+                "bottom half",
+                bottom_block.difference(&dev).simplify(SLIVER_MM),
+            )
+        },
+    );
+    let (top, bottom) = (top?, bottom?);
+    progress.tick(1);
+
+    progress.stage("checking the mold", 1);
+    let genus_top = 1 + f.vents.len() as u32 + f.bolts.len() as u32;
+    let genus_bottom = f.bolts.len() as u32;
+    let mut checks = Vec::new();
+    let (top_t, bottom_t) = (to_mesh(&top), to_mesh(&bottom));
+    for (name, mesh, genus) in [
+        ("top", &top_t.mesh, genus_top),
+        ("bottom", &bottom_t.mesh, genus_bottom),
+    ] {
+        for mut c in solid_checks_for(mesh, SolidSpec::boolean_result(genus)) {
+            c.detail = format!("mold-{name}: {}", c.detail);
+            checks.push(c);
+        }
+    }
+
+    // §7.4 volumes. The voids are measured from the channel and key
+    // primitives, independently of the halves.
+    let (v_top, v_bottom) = (top_t.mesh.volume(), bottom_t.mesh.volume());
+    let v_device = posed.mesh.volume();
+    let v_block = (f.block_hi - f.block_lo).element_product();
+    let channels_in_block = checked("channels in the block", channels.intersection(&block))?;
+    let channels_in_device = checked(
+        "channels in the cavity",
+        channels_in_block.intersection(&dev),
+    )?;
+    let clearances = checked(
+        "key clearances",
+        sockets.intersection(&upper).difference(&bumps),
+    )?;
+    let v_voids = channels_in_block.volume() - channels_in_device.volume() + clearances.volume();
+    let sum = v_top + v_bottom + v_device + v_voids;
+    checks.push(CheckResult::at_most(
+        "mold-volumes-sum",
+        ((sum - v_block) / v_block).abs(),
+        VOLUME_SUM_REL,
+        "relative",
+        format!("top {v_top:.6} + bottom {v_bottom:.6} + device {v_device:.6} + voids {v_voids:.6} = {sum:.6} mm³; block {v_block:.6} mm³"),
+    ));
+
+    // §7.5 overlaps, measured with fresh booleans.
+    let overlaps: Vec<(&str, f64)> = [
+        ("top ∩ bottom", &top, &bottom),
+        ("top ∩ device", &top, &dev),
+        ("bottom ∩ device", &bottom, &dev),
+    ]
+    .par_iter()
+    .map(|(name, a, b)| (*name, a.intersection(b).volume()))
+    .collect();
+    let worst = overlaps
+        .iter()
+        .copied()
+        .fold(("", 0.0f64), |w, o| if o.1 > w.1 { o } else { w });
+    checks.push(CheckResult::at_most(
+        "mold-no-overlaps",
+        worst.1,
+        OVERLAP_MM3,
+        "mm³",
+        overlaps
+            .iter()
+            .map(|(n, v)| format!("{n}: {v:.3e}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+    ));
+
+    // §7.6 the cavity is the device: faces traced back to the device lie on
+    // their source triangles, and cover it but for the channel openings.
+    let mut worst_off = 0.0f64;
+    let mut cavity_area = 0.0;
+    for traced in [&top_t, &bottom_t] {
+        for (t, &(id, face)) in traced.mesh.triangles.iter().zip(&traced.source) {
+            if id != device_id {
+                continue;
+            }
+            cavity_area += traced.mesh.triangle_area(t);
+            let Some(src) = posed.mesh.triangles.get(face as usize) else {
+                worst_off = f64::INFINITY;
+                continue;
+            };
+            let [a, b, c] = src.map(|i| posed.mesh.positions[i as usize]);
+            for &v in t {
+                let q = traced.mesh.positions[v as usize];
+                let off = (moirecast_kernel::measure::closest_on_triangle(q, a, b, c) - q).length();
+                worst_off = worst_off.max(off);
+            }
+        }
+    }
+    let device_area = posed.mesh.area();
+    checks.push(CheckResult::at_most(
+        "cavity-on-device",
+        worst_off,
+        CAVITY_ON_DEVICE_MM,
+        "mm",
+        "largest distance of a cavity-face vertex from the device triangle it came from".into(),
+    ));
+    // An opening's area on the device exceeds its circle where the lenses
+    // ripple or the surface slopes under it; half as much again bounds that.
+    let openings: f64 = OPENING_SLACK
+        * std::f64::consts::PI
+        * (f.gate.radius.powi(2) + f.vents.iter().map(|v| v.radius.powi(2)).sum::<f64>());
+    checks.push(CheckResult::at_most(
+        "cavity-covers-device",
+        (device_area - cavity_area) / device_area,
+        openings / device_area,
+        "of the device's area",
+        format!(
+            "cavity faces {cavity_area:.4} mm² of the device's {device_area:.4} mm²; the gate and vent openings are at most {openings:.4} mm²"
+        ),
+    ));
+
+    // §7.7 demoulding and filling.
+    let draft = draft_top.degrees.min(draft_bottom.degrees);
+    checks.push(CheckResult::at_least(
+        "demouldable",
+        draft,
+        p.min_draft_deg,
+        "degrees",
+        format!(
+            "worst lens-face draft: top half {:.2}° at ({:.2}, {:.2}, {:.2}), bottom half {:.2}° at ({:.2}, {:.2}, {:.2}); walls are vertical and split at mid-height",
+            draft_top.degrees, draft_top.at.x, draft_top.at.y, draft_top.at.z,
+            draft_bottom.degrees, draft_bottom.at.x, draft_bottom.at.y, draft_bottom.at.z
+        ),
+    ));
+    let cast = checked("device with its channels", dev.union(&fill))?;
+    let pieces = cast.decompose().len();
+    checks.push(CheckResult::at_most(
+        "cavity-reachable",
+        pieces as f64,
+        1.0,
+        "connected pieces",
+        "the cavity, runner, sprue and every vent form one connected void".into(),
+    ));
+    let sprue_top = f.block_hi.z;
+    let lowest_vent_top = f
+        .vents
+        .iter()
+        .map(|_| f.block_hi.z)
+        .fold(f64::INFINITY, f64::min);
+    checks.push(CheckResult::at_least(
+        "vents-not-below-sprue",
+        lowest_vent_top - sprue_top,
+        0.0,
+        "mm",
+        format!(
+            "{} vents; every vent and the sprue open on the top face",
+            f.vents.len()
+        ),
+    ));
+    progress.tick(1);
+
+    Ok(Mold {
+        device: posed.mesh,
+        top: top_t.mesh,
+        bottom: bottom_t.mesh,
+        volumes: Volumes {
+            block: v_block,
+            top: v_top,
+            bottom: v_bottom,
+            device: v_device,
+            voids: v_voids,
+        },
+        features: f,
+        draft_top,
+        draft_bottom,
+        genus_top,
+        genus_bottom,
+        parting_triangles: region.triangles.len(),
+        checks,
+    })
+}

@@ -1,0 +1,737 @@
+//! The device posed in the mold frame, its mid-wall curve, and the parting
+//! surface (METHOD §6): the device inside the outline, a skirt carried
+//! horizontally outward from the mid-wall curve outside it.
+
+use crate::error::{MoldError, Result};
+use glam::{DVec2, DVec3};
+use moirecast_kernel::mesher::Patch;
+use moirecast_kernel::model::LensRef;
+use moirecast_kernel::{Design, DeviceMesh, Mesh};
+use std::collections::HashMap;
+
+/// A side of the outline rectangle, in the mold frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Wall {
+    XMin,
+    XMax,
+    YMin,
+    YMax,
+}
+
+impl Wall {
+    pub const ALL: [Wall; 4] = [Wall::YMin, Wall::XMax, Wall::YMax, Wall::XMin];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Wall::XMin => "x-min",
+            Wall::XMax => "x-max",
+            Wall::YMin => "y-min",
+            Wall::YMax => "y-max",
+        }
+    }
+
+    /// Unit outward normal in xy.
+    pub fn outward(self) -> DVec2 {
+        match self {
+            Wall::XMin => DVec2::NEG_X,
+            Wall::XMax => DVec2::X,
+            Wall::YMin => DVec2::NEG_Y,
+            Wall::YMax => DVec2::Y,
+        }
+    }
+
+    /// The coordinate that runs along the wall.
+    pub fn along(self, p: DVec3) -> f64 {
+        match self {
+            Wall::XMin | Wall::XMax => p.y,
+            Wall::YMin | Wall::YMax => p.x,
+        }
+    }
+
+    /// The point of this wall of `rect` at along-coordinate `t`, height `z`.
+    pub fn point(self, rect: &Rect, t: f64, z: f64) -> DVec3 {
+        match self {
+            Wall::XMin => DVec3::new(rect.x0, t, z),
+            Wall::XMax => DVec3::new(rect.x1, t, z),
+            Wall::YMin => DVec3::new(t, rect.y0, z),
+            Wall::YMax => DVec3::new(t, rect.y1, z),
+        }
+    }
+
+    /// The along-coordinate range of this wall of `rect`.
+    pub fn span(self, rect: &Rect) -> (f64, f64) {
+        match self {
+            Wall::XMin | Wall::XMax => (rect.y0, rect.y1),
+            Wall::YMin | Wall::YMax => (rect.x0, rect.x1),
+        }
+    }
+}
+
+/// An axis-aligned rectangle in xy.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rect {
+    pub x0: f64,
+    pub x1: f64,
+    pub y0: f64,
+    pub y1: f64,
+}
+
+impl Rect {
+    pub fn grown(&self, by: f64) -> Rect {
+        Rect {
+            x0: self.x0 - by,
+            x1: self.x1 + by,
+            y0: self.y0 - by,
+            y1: self.y1 + by,
+        }
+    }
+    pub fn centre(&self) -> DVec2 {
+        DVec2::new(0.5 * (self.x0 + self.x1), 0.5 * (self.y0 + self.y1))
+    }
+    /// Signed distance from `p` to the rectangle's boundary: negative inside.
+    pub fn signed_distance(&self, p: DVec2) -> f64 {
+        let c = self.centre();
+        let half = DVec2::new(0.5 * (self.x1 - self.x0), 0.5 * (self.y1 - self.y0));
+        let q = (p - c).abs() - half;
+        q.max(DVec2::ZERO).length() + q.x.max(q.y).min(0.0)
+    }
+}
+
+/// Which face of the cavity a device triangle is, in the mold frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Face {
+    /// A lens face under the top half (drawn along +z).
+    Upper,
+    /// A lens face over the bottom half (drawn along −z).
+    Lower,
+    Wall(Wall),
+}
+
+/// The device in the mold frame: rotated 180° about x if flipped, scaled by
+/// the shrink factor about its outline's centre.
+pub struct PosedDevice {
+    pub mesh: Mesh,
+    pub faces: Vec<Face>,
+    /// The outline: the xy bounds of the posed device.
+    pub outline: Rect,
+    pub flip: bool,
+    pub scale: f64,
+    /// The centre of the pose: the outline's centre at z = 0.
+    pub centre: DVec3,
+}
+
+impl PosedDevice {
+    pub fn new(design: &Design, device: &DeviceMesh, flip: bool, scale: f64) -> Result<Self> {
+        let (ox0, ox1) = design.outline_x;
+        let hh = design.half_height;
+        let centre = DVec3::new(0.5 * (ox0 + ox1), 0.0, 0.0);
+        let positions: Vec<DVec3> = device
+            .mesh
+            .positions
+            .iter()
+            .map(|&p| pose(centre, flip, scale, p))
+            .collect();
+        let mesh = Mesh {
+            positions,
+            triangles: device.mesh.triangles.clone(),
+        };
+        let faces = device
+            .patches
+            .iter()
+            .zip(&mesh.triangles)
+            .map(|(patch, t)| match patch {
+                Patch::Lens(LensRef::Revealer(_)) if !flip => Ok(Face::Upper),
+                Patch::Lens(LensRef::Base(_)) if flip => Ok(Face::Upper),
+                Patch::Lens(_) => Ok(Face::Lower),
+                Patch::Wall(_) => {
+                    let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+                    let n = (b - a).cross(c - a);
+                    let wall = if n.x.abs() > n.y.abs() {
+                        if n.x < 0.0 {
+                            Wall::XMin
+                        } else {
+                            Wall::XMax
+                        }
+                    } else if n.y < 0.0 {
+                        Wall::YMin
+                    } else {
+                        Wall::YMax
+                    };
+                    Ok(Face::Wall(wall))
+                }
+            })
+            .collect::<Result<Vec<_>>>()?;
+        // The exact outline, posed (vertices lie on it to the wall snap).
+        let (a, b) = (
+            pose(centre, flip, scale, DVec3::new(ox0, -hh, 0.0)),
+            pose(centre, flip, scale, DVec3::new(ox1, hh, 0.0)),
+        );
+        let outline = Rect {
+            x0: a.x.min(b.x),
+            x1: a.x.max(b.x),
+            y0: a.y.min(b.y),
+            y1: a.y.max(b.y),
+        };
+        Ok(PosedDevice {
+            mesh,
+            faces,
+            outline,
+            flip,
+            scale,
+            centre,
+        })
+    }
+
+    /// A point of the design frame in the mold frame.
+    pub fn pose(&self, p: DVec3) -> DVec3 {
+        pose(self.centre, self.flip, self.scale, p)
+    }
+}
+
+fn pose(centre: DVec3, flip: bool, scale: f64, p: DVec3) -> DVec3 {
+    // A proper rotation (det +1) keeps the triangles' orientation.
+    let q = p - centre;
+    let q = if flip { DVec3::new(q.x, -q.y, -q.z) } else { q };
+    centre + scale * q
+}
+
+/// A piecewise-linear function z(t) with strictly increasing t.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Polyline {
+    pub t: Vec<f64>,
+    pub z: Vec<f64>,
+}
+
+impl Polyline {
+    /// Linear interpolation, clamped at the ends.
+    pub fn eval(&self, t: f64) -> f64 {
+        let i = self.t.partition_point(|&x| x <= t);
+        if i == 0 {
+            return self.z[0];
+        }
+        if i >= self.t.len() {
+            return *self.z.last().expect("non-empty polyline");
+        }
+        let (t0, t1) = (self.t[i - 1], self.t[i]);
+        let s = (t - t0) / (t1 - t0);
+        self.z[i - 1] + s * (self.z[i] - self.z[i - 1])
+    }
+
+    /// Smallest and largest z over [a, b] (breakpoints and ends).
+    pub fn range(&self, a: f64, b: f64) -> (f64, f64) {
+        let mut lo = self.eval(a).min(self.eval(b));
+        let mut hi = self.eval(a).max(self.eval(b));
+        for (t, z) in self.t.iter().zip(&self.z) {
+            if *t > a && *t < b {
+                lo = lo.min(*z);
+                hi = hi.max(*z);
+            }
+        }
+        (lo, hi)
+    }
+}
+
+/// The top and bottom edges of one wall and the mid-wall curve between them.
+#[derive(Clone, Debug)]
+pub struct WallCurves {
+    pub wall: Wall,
+    pub upper: Polyline,
+    pub lower: Polyline,
+    /// Through the midpoints of the wall's rungs: halfway up the meshed wall.
+    pub mid: Polyline,
+}
+
+/// The four walls' edge curves, read off the posed mesh.
+pub fn wall_curves(device: &PosedDevice) -> Result<Vec<WallCurves>> {
+    let n = device.mesh.positions.len();
+    let (mut on_upper, mut on_lower) = (vec![false; n], vec![false; n]);
+    for (t, face) in device.mesh.triangles.iter().zip(&device.faces) {
+        let flags = match face {
+            Face::Upper => &mut on_upper,
+            Face::Lower => &mut on_lower,
+            Face::Wall(_) => continue,
+        };
+        for &v in t {
+            flags[v as usize] = true;
+        }
+    }
+    let rect = device.outline;
+    let mut curves: Vec<WallCurves> = Vec::new();
+    for wall in Wall::ALL {
+        let mut seen = vec![false; n];
+        let (mut upper, mut lower) = (Vec::new(), Vec::new());
+        for (t, face) in device.mesh.triangles.iter().zip(&device.faces) {
+            if *face != Face::Wall(wall) {
+                continue;
+            }
+            for &v in t {
+                let v = v as usize;
+                if std::mem::replace(&mut seen[v], true) {
+                    continue;
+                }
+                let p = device.mesh.positions[v];
+                if on_upper[v] {
+                    upper.push((wall.along(p), p.z));
+                }
+                if on_lower[v] {
+                    lower.push((wall.along(p), p.z));
+                }
+            }
+        }
+        let span = wall.span(&rect);
+        let upper = polyline(wall, upper, span)?;
+        let lower = polyline(wall, lower, span)?;
+        // The mid curve runs through the midpoints of the wall's rungs (its
+        // edges from the top edge to the bottom edge): it crosses every wall
+        // triangle along its mid-line, so the parting surface meets the wall
+        // without sliver triangles.
+        let mut rungs: Vec<(f64, f64)> = Vec::new();
+        for (t, face) in device.mesh.triangles.iter().zip(&device.faces) {
+            if *face != Face::Wall(wall) {
+                continue;
+            }
+            for k in 0..3 {
+                let (a, b) = (t[k] as usize, t[(k + 1) % 3] as usize);
+                if on_upper[a] && !on_lower[a] && on_lower[b] && !on_upper[b]
+                    || on_lower[a] && !on_upper[a] && on_upper[b] && !on_lower[b]
+                {
+                    let m = 0.5 * (device.mesh.positions[a] + device.mesh.positions[b]);
+                    rungs.push((wall.along(m), m.z));
+                }
+            }
+        }
+        let mid = polyline(wall, rungs, span)?;
+        curves.push(WallCurves {
+            wall,
+            upper,
+            lower,
+            mid,
+        });
+    }
+    // The corners: both walls meeting there share the corner's vertical edge,
+    // so their mid values agree; make them bit-identical.
+    for (a, b, a_end, b_end) in [
+        (0usize, 3usize, false, false), // y-min start, x-min start: (x0, y0)
+        (0, 1, true, false),            // y-min end, x-max start: (x1, y0)
+        (2, 1, true, true),             // y-max end, x-max end: (x1, y1)
+        (2, 3, false, true),            // y-max start, x-min end: (x0, y1)
+    ] {
+        let za = if a_end {
+            *curves[a].mid.z.last().unwrap()
+        } else {
+            curves[a].mid.z[0]
+        };
+        let zb = if b_end {
+            *curves[b].mid.z.last().unwrap()
+        } else {
+            curves[b].mid.z[0]
+        };
+        if (za - zb).abs() > 1e-6 {
+            return Err(MoldError::NotSolid {
+                what: "device walls",
+                detail: format!("mid-wall heights {za} and {zb} disagree at a corner"),
+            });
+        }
+        let z = 0.5 * (za + zb);
+        for (c, end) in [(a, a_end), (b, b_end)] {
+            let mid = &mut curves[c].mid.z;
+            let k = if end { mid.len() - 1 } else { 0 };
+            mid[k] = z;
+        }
+    }
+    Ok(curves)
+}
+
+/// How far a wall edge's ends may sit from the outline's corners: the
+/// mesher snaps crease-wall crossings by up to `WALL_SNAP_MM`.
+const EDGE_SPAN_SLACK_MM: f64 = 1e-4;
+
+/// Sorts wall-edge samples into a polyline spanning exactly `span`.
+fn polyline(wall: Wall, mut pts: Vec<(f64, f64)>, span: (f64, f64)) -> Result<Polyline> {
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    pts.dedup_by(|a, b| a.0 == b.0 && a.1 == b.1);
+    let bad = |detail: String| MoldError::NotSolid {
+        what: "device walls",
+        detail: format!("{} wall: {detail}", wall.name()),
+    };
+    if pts.len() < 2 {
+        return Err(bad("fewer than two edge vertices".into()));
+    }
+    if pts.windows(2).any(|w| w[0].0 == w[1].0) {
+        return Err(bad("an edge is not a graph along the wall".into()));
+    }
+    let (first, last) = (pts[0].0, pts[pts.len() - 1].0);
+    if (first - span.0).abs() > EDGE_SPAN_SLACK_MM || (last - span.1).abs() > EDGE_SPAN_SLACK_MM {
+        return Err(bad(format!(
+            "edge spans [{first}, {last}], the outline [{}, {}]",
+            span.0, span.1
+        )));
+    }
+    let n = pts.len();
+    pts[0].0 = span.0;
+    pts[n - 1].0 = span.1;
+    Ok(Polyline {
+        t: pts.iter().map(|p| p.0).collect(),
+        z: pts.iter().map(|p| p.1).collect(),
+    })
+}
+
+/// Vertical ray casts into a set of triangles that form a graph over xy:
+/// a uniform bucket grid over their xy bounds.
+pub struct HeightQuery<'a> {
+    mesh: &'a Mesh,
+    tris: Vec<u32>,
+    cells: Vec<(u32, u32)>,
+    lo: DVec2,
+    cell: DVec2,
+    n: (usize, usize),
+}
+
+impl<'a> HeightQuery<'a> {
+    pub fn new(mesh: &'a Mesh, selected: impl Iterator<Item = usize>) -> Self {
+        let selected: Vec<usize> = selected.collect();
+        let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
+        for &t in &selected {
+            for v in mesh.triangles[t] {
+                let p = mesh.positions[v as usize].truncate();
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+        let side = ((selected.len() as f64).sqrt() / 2.0).ceil().max(1.0) as usize;
+        let n = (side, side);
+        let cell = (hi - lo).max(DVec2::splat(1e-9)) / DVec2::new(n.0 as f64, n.1 as f64);
+        let bucket = |p: DVec2| {
+            let q = ((p - lo) / cell).floor();
+            (
+                (q.x.max(0.0) as usize).min(n.0 - 1),
+                (q.y.max(0.0) as usize).min(n.1 - 1),
+            )
+        };
+        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); n.0 * n.1];
+        for &t in &selected {
+            let ps = mesh.triangles[t].map(|v| mesh.positions[v as usize].truncate());
+            let (a, b) = (
+                bucket(ps[0].min(ps[1]).min(ps[2])),
+                bucket(ps[0].max(ps[1]).max(ps[2])),
+            );
+            for j in a.1..=b.1 {
+                for i in a.0..=b.0 {
+                    lists[j * n.0 + i].push(t as u32);
+                }
+            }
+        }
+        let mut tris = Vec::new();
+        let mut cells = Vec::with_capacity(lists.len());
+        for l in lists {
+            cells.push((tris.len() as u32, l.len() as u32));
+            tris.extend(l);
+        }
+        HeightQuery {
+            mesh,
+            tris,
+            cells,
+            lo,
+            cell,
+            n,
+        }
+    }
+
+    /// The height of the surface above (x, y), if a triangle covers it.
+    pub fn height(&self, p: DVec2) -> Option<f64> {
+        let q = ((p - self.lo) / self.cell).floor();
+        if q.x < -1.0 || q.y < -1.0 {
+            return None;
+        }
+        let (i, j) = (
+            (q.x.max(0.0) as usize).min(self.n.0 - 1),
+            (q.y.max(0.0) as usize).min(self.n.1 - 1),
+        );
+        let (start, len) = self.cells[j * self.n.0 + i];
+        for &t in &self.tris[start as usize..(start + len) as usize] {
+            let [a, b, c] =
+                self.mesh.triangles[t as usize].map(|v| self.mesh.positions[v as usize]);
+            let d = (b - a).truncate().perp_dot((c - a).truncate());
+            if d == 0.0 {
+                continue;
+            }
+            let l1 = (p - a.truncate()).perp_dot((c - a).truncate()) / d;
+            let l2 = (b - a).truncate().perp_dot(p - a.truncate()) / d;
+            let l0 = 1.0 - l1 - l2;
+            const EPS: f64 = -1e-12;
+            if l0 >= EPS && l1 >= EPS && l2 >= EPS {
+                return Some(l0 * a.z + l1 * b.z + l2 * c.z);
+            }
+        }
+        None
+    }
+}
+
+/// Builds a closed mesh from triangles given with the outward direction they
+/// must face; identical positions share one vertex.
+#[derive(Default)]
+pub struct SolidBuilder {
+    pub mesh: Mesh,
+    index: HashMap<[u64; 3], u32>,
+}
+
+impl SolidBuilder {
+    pub fn vertex(&mut self, p: DVec3) -> u32 {
+        let key = p.to_array().map(|c| (c + 0.0).to_bits());
+        *self.index.entry(key).or_insert_with(|| {
+            self.mesh.positions.push(p);
+            (self.mesh.positions.len() - 1) as u32
+        })
+    }
+
+    /// Adds triangle (a, b, c), wound so its normal faces `outward`.
+    pub fn triangle(&mut self, a: DVec3, b: DVec3, c: DVec3, outward: DVec3) {
+        let n = (b - a).cross(c - a);
+        let (ia, ib, ic) = (self.vertex(a), self.vertex(b), self.vertex(c));
+        if n.dot(outward) >= 0.0 {
+            self.mesh.triangles.push([ia, ib, ic]);
+        } else {
+            self.mesh.triangles.push([ia, ic, ib]);
+        }
+    }
+
+    pub fn quad(&mut self, a: DVec3, b: DVec3, c: DVec3, d: DVec3, outward: DVec3) {
+        self.triangle(a, b, c, outward);
+        self.triangle(a, c, d, outward);
+    }
+}
+
+/// Zips two polylines that run side by side (a strip between two parallel
+/// segments) into triangles, advancing whichever is behind.
+fn zip_strip(
+    b: &mut SolidBuilder,
+    outer: &[DVec3],
+    inner: &[DVec3],
+    along: impl Fn(DVec3) -> f64,
+    outward: DVec3,
+) {
+    let norm = |pts: &[DVec3], k: usize| {
+        let (s, e) = (along(pts[0]), along(pts[pts.len() - 1]));
+        (along(pts[k]) - s) / (e - s)
+    };
+    let (mut i, mut j) = (0, 0);
+    while i + 1 < outer.len() || j + 1 < inner.len() {
+        let advance_outer = if i + 1 == outer.len() {
+            false
+        } else if j + 1 == inner.len() {
+            true
+        } else {
+            norm(outer, i + 1) <= norm(inner, j + 1)
+        };
+        if advance_outer {
+            b.triangle(outer[i], outer[i + 1], inner[j], outward);
+            i += 1;
+        } else {
+            b.triangle(outer[i], inner[j + 1], inner[j], outward);
+            j += 1;
+        }
+    }
+}
+
+/// The region above the parting surface, as a closed solid over `footprint`
+/// (which must contain the block, with room to spare) up to `top_z`.
+///
+/// Outside the outline its floor is the skirt: each wall's mid curve carried
+/// horizontally outward, flat over the corners. Inside, the floor runs
+/// through the device's interior (`interior_mid`, the mid height between the
+/// device's faces at a grid of points) and is cut away with the device.
+pub fn upper_region(
+    outline: &Rect,
+    walls: &[WallCurves],
+    interior_mid: &dyn Fn(DVec2) -> f64,
+    cells: (usize, usize),
+    footprint: &Rect,
+    top_z: f64,
+) -> Mesh {
+    let down = DVec3::NEG_Z;
+    let mut b = SolidBuilder::default();
+    let curve = |w: Wall| walls.iter().find(|c| c.wall == w).expect("four walls");
+    let on_wall = |w: Wall| -> Vec<DVec3> {
+        let c = curve(w);
+        c.mid
+            .t
+            .iter()
+            .zip(&c.mid.z)
+            .map(|(&t, &z)| w.point(outline, t, z))
+            .collect()
+    };
+    let carried_out = |w: Wall, p: DVec3| -> DVec3 {
+        match w {
+            Wall::XMin => DVec3::new(footprint.x0, p.y, p.z),
+            Wall::XMax => DVec3::new(footprint.x1, p.y, p.z),
+            Wall::YMin => DVec3::new(p.x, footprint.y0, p.z),
+            Wall::YMax => DVec3::new(p.x, footprint.y1, p.z),
+        }
+    };
+    // Skirt strips.
+    for w in Wall::ALL {
+        let pts = on_wall(w);
+        for k in 0..pts.len() - 1 {
+            let (p, q) = (pts[k], pts[k + 1]);
+            b.quad(p, q, carried_out(w, q), carried_out(w, p), down);
+        }
+    }
+    // Corner flats, at the height of the corner's mid point.
+    let corner_z = |w: Wall, end: bool| {
+        let c = &curve(w).mid;
+        if end {
+            *c.z.last().unwrap()
+        } else {
+            c.z[0]
+        }
+    };
+    let corners = [
+        (
+            outline.x0,
+            outline.y0,
+            footprint.x0,
+            footprint.y0,
+            corner_z(Wall::YMin, false),
+        ),
+        (
+            outline.x1,
+            outline.y0,
+            footprint.x1,
+            footprint.y0,
+            corner_z(Wall::YMin, true),
+        ),
+        (
+            outline.x1,
+            outline.y1,
+            footprint.x1,
+            footprint.y1,
+            corner_z(Wall::YMax, true),
+        ),
+        (
+            outline.x0,
+            outline.y1,
+            footprint.x0,
+            footprint.y1,
+            corner_z(Wall::YMax, false),
+        ),
+    ];
+    for &(x, y, fx, fy, z) in &corners {
+        b.quad(
+            DVec3::new(x, y, z),
+            DVec3::new(fx, y, z),
+            DVec3::new(fx, fy, z),
+            DVec3::new(x, fy, z),
+            down,
+        );
+    }
+    // Interior grid (nodes strictly inside the outline) and the ring zipped
+    // between its border and the walls' mid curves.
+    let (nx, ny) = (cells.0.max(2), cells.1.max(2));
+    let gx: Vec<f64> = (1..nx)
+        .map(|i| outline.x0 + (outline.x1 - outline.x0) * i as f64 / nx as f64)
+        .collect();
+    let gy: Vec<f64> = (1..ny)
+        .map(|j| outline.y0 + (outline.y1 - outline.y0) * j as f64 / ny as f64)
+        .collect();
+    let node: Vec<Vec<DVec3>> = gy
+        .iter()
+        .map(|&y| {
+            gx.iter()
+                .map(|&x| DVec3::new(x, y, interior_mid(DVec2::new(x, y))))
+                .collect()
+        })
+        .collect();
+    for j in 0..gy.len() - 1 {
+        for i in 0..gx.len() - 1 {
+            b.quad(
+                node[j][i],
+                node[j][i + 1],
+                node[j + 1][i + 1],
+                node[j + 1][i],
+                down,
+            );
+        }
+    }
+    let (last_i, last_j) = (gx.len() - 1, gy.len() - 1);
+    let inner = |w: Wall| -> Vec<DVec3> {
+        match w {
+            Wall::YMin => node[0].clone(),
+            Wall::YMax => node[last_j].clone(),
+            Wall::XMin => node.iter().map(|r| r[0]).collect(),
+            Wall::XMax => node.iter().map(|r| r[last_i]).collect(),
+        }
+    };
+    for w in Wall::ALL {
+        zip_strip(&mut b, &on_wall(w), &inner(w), |p| w.along(p), down);
+    }
+    // Sides of the region, from the floor's border up to `top_z`, and the top.
+    let border = |w: Wall| -> Vec<DVec3> {
+        // The floor's border on the footprint side beyond wall `w`, in
+        // increasing along-coordinate, corners included.
+        let (c0, c1) = match w {
+            Wall::YMin => (corners[0], corners[1]),
+            Wall::XMax => (corners[1], corners[2]),
+            Wall::YMax => (corners[3], corners[2]),
+            Wall::XMin => (corners[0], corners[3]),
+        };
+        let start = match w {
+            Wall::XMin | Wall::XMax => DVec3::new(
+                if w == Wall::XMin {
+                    footprint.x0
+                } else {
+                    footprint.x1
+                },
+                footprint.y0,
+                c0.4,
+            ),
+            Wall::YMin | Wall::YMax => DVec3::new(
+                footprint.x0,
+                if w == Wall::YMin {
+                    footprint.y0
+                } else {
+                    footprint.y1
+                },
+                c0.4,
+            ),
+        };
+        let end = match w {
+            Wall::XMin | Wall::XMax => DVec3::new(start.x, footprint.y1, c1.4),
+            Wall::YMin | Wall::YMax => DVec3::new(footprint.x1, start.y, c1.4),
+        };
+        let mut pts = vec![start];
+        pts.extend(on_wall(w).into_iter().map(|p| carried_out(w, p)));
+        pts.push(end);
+        pts
+    };
+    let mut top_ring: Vec<DVec3> = Vec::new();
+    for w in Wall::ALL {
+        let pts = border(w);
+        // Counter-clockwise seen from above: y-min and x-max forward,
+        // y-max and x-min backward.
+        let ring_part: Vec<DVec3> = match w {
+            Wall::YMin | Wall::XMax => pts.clone(),
+            Wall::YMax | Wall::XMin => pts.iter().rev().copied().collect(),
+        };
+        for q in ring_part {
+            let q = DVec3::new(q.x, q.y, top_z);
+            if top_ring.last() != Some(&q) {
+                top_ring.push(q);
+            }
+        }
+        let out = w.outward().extend(0.0);
+        for k in 0..pts.len() - 1 {
+            let (p, q) = (pts[k], pts[k + 1]);
+            let (pt, qt) = (DVec3::new(p.x, p.y, top_z), DVec3::new(q.x, q.y, top_z));
+            b.quad(p, q, qt, pt, out);
+        }
+    }
+    if top_ring.first() == top_ring.last() {
+        top_ring.pop();
+    }
+    let c = footprint.centre().extend(top_z);
+    for k in 0..top_ring.len() {
+        let (p, q) = (top_ring[k], top_ring[(k + 1) % top_ring.len()]);
+        b.triangle(c, p, q, DVec3::Z);
+    }
+    b.mesh
+}

@@ -1,0 +1,175 @@
+//! `report.json` of `moirecast mold`: volumes, every mold invariant of
+//! METHOD §7 with its measured value, the worst draft and where it is, and
+//! the positions of the gate, vents, keys and bolts. Deterministic.
+
+use crate::report::{design_echo, CheckReport, DesignEcho, FileReport};
+use moirecast_kernel::check::CheckResult;
+use moirecast_mold::{Mold, MoldParams, VentPlace};
+use moirecast_spec::Spec;
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+#[derive(Serialize)]
+pub struct FrameReport {
+    /// The device was rotated 180° about x (base lenses up).
+    pub flip: bool,
+    pub shrink_scale: f64,
+    pub note: &'static str,
+}
+
+#[derive(Serialize)]
+pub struct VolumeReport {
+    pub block_mm3: f64,
+    pub top_mm3: f64,
+    pub bottom_mm3: f64,
+    pub device_mm3: f64,
+    /// Channels, bolt holes and key clearances inside the block, measured
+    /// from the channel and key primitives.
+    pub channels_mm3: f64,
+    /// (top + bottom + device + channels − block) / block.
+    pub sum_relative_error: f64,
+}
+
+#[derive(Serialize)]
+pub struct DraftReport {
+    pub degrees: f64,
+    pub at: [f64; 3],
+}
+
+#[derive(Serialize)]
+pub struct GateReport {
+    pub wall: &'static str,
+    pub at: [f64; 3],
+    pub diameter_mm: f64,
+    /// Horizontal runner from the gate to the sprue, on the parting line.
+    pub runner_to: [f64; 3],
+    pub sprue_axis: [f64; 2],
+    pub sprue_diameter_mm: f64,
+    pub sprue_z: [f64; 2],
+    pub pour_cone_diameter_mm: f64,
+    pub pour_cone_depth_mm: f64,
+}
+
+#[derive(Serialize)]
+pub struct VentReport {
+    /// Where the ceiling (without the ripple of single lenses) is highest.
+    pub maximum: [f64; 3],
+    /// "wall x-max", "corner" or "lenses" (a stub on the optics).
+    pub attaches: String,
+    pub axis: [f64; 2],
+    pub diameter_mm: f64,
+    pub z: [f64; 2],
+}
+
+#[derive(Serialize)]
+pub struct KeyReport {
+    /// Centre of the bump's base on the skirt; the socket is in the top half.
+    pub at: [f64; 3],
+}
+
+#[derive(Serialize)]
+pub struct MoldReport {
+    pub moirecast: &'static str,
+    pub spec: String,
+    pub design: DesignEcho,
+    pub mold: MoldParams,
+    pub frame: FrameReport,
+    pub block_min: [f64; 3],
+    pub block_max: [f64; 3],
+    pub files: BTreeMap<String, FileReport>,
+    pub volumes: VolumeReport,
+    /// Through-holes of each half (its genus): the channels through it.
+    pub channels_through_top: u32,
+    pub channels_through_bottom: u32,
+    pub draft_top: DraftReport,
+    pub draft_bottom: DraftReport,
+    pub gate: GateReport,
+    pub vents: Vec<VentReport>,
+    pub keys: Vec<KeyReport>,
+    pub key_diameter_mm: f64,
+    pub bolts: Vec<[f64; 2]>,
+    pub parting_surface_triangles: usize,
+    pub warnings: Vec<String>,
+    /// Names of the checks that failed (written only with --force).
+    pub failed: Vec<&'static str>,
+    pub checks: Vec<CheckReport>,
+}
+
+pub fn mold_report(
+    spec: &Spec,
+    mold: &Mold,
+    checks: &[CheckResult],
+    files: BTreeMap<String, FileReport>,
+) -> MoldReport {
+    let f = &mold.features;
+    let v = &mold.volumes;
+    let g = &f.gate;
+    let (from, dir, length) = moirecast_mold::features::runner_span(g);
+    let runner_to = from + (dir * length).extend(0.0);
+    let top = f.block_hi.z;
+    MoldReport {
+        moirecast: env!("CARGO_PKG_VERSION"),
+        spec: crate::report::spec_name(spec),
+        design: design_echo(spec),
+        mold: spec.mold.clone(),
+        frame: FrameReport {
+            flip: spec.mold.flip,
+            shrink_scale: spec.mold.shrink_scale,
+            note: "all files share the mold frame: device.stl is the cavity's shape (the device rotated 180° about x if flipped, scaled by shrink_scale about its outline's centre)",
+        },
+        block_min: f.block_lo.to_array(),
+        block_max: f.block_hi.to_array(),
+        files,
+        volumes: VolumeReport {
+            block_mm3: v.block,
+            top_mm3: v.top,
+            bottom_mm3: v.bottom,
+            device_mm3: v.device,
+            channels_mm3: v.voids,
+            sum_relative_error: (v.top + v.bottom + v.device + v.voids - v.block) / v.block,
+        },
+        channels_through_top: mold.genus_top,
+        channels_through_bottom: mold.genus_bottom,
+        draft_top: DraftReport {
+            degrees: mold.draft_top.degrees,
+            at: mold.draft_top.at.to_array(),
+        },
+        draft_bottom: DraftReport {
+            degrees: mold.draft_bottom.degrees,
+            at: mold.draft_bottom.at.to_array(),
+        },
+        gate: GateReport {
+            wall: g.wall.name(),
+            at: g.at.to_array(),
+            diameter_mm: 2.0 * g.radius,
+            runner_to: runner_to.to_array(),
+            sprue_axis: g.sprue_axis.to_array(),
+            sprue_diameter_mm: 2.0 * g.sprue_radius,
+            sprue_z: [g.sprue_bottom_z, top],
+            pour_cone_diameter_mm: 2.0 * g.cone_radius,
+            pour_cone_depth_mm: g.cone_depth,
+        },
+        vents: f
+            .vents
+            .iter()
+            .map(|v| VentReport {
+                maximum: v.maximum.to_array(),
+                attaches: match v.place {
+                    VentPlace::Wall(w) => format!("wall {}", w.name()),
+                    VentPlace::Corner => "corner".into(),
+                    VentPlace::Lenses => "lenses".into(),
+                },
+                axis: v.axis.to_array(),
+                diameter_mm: 2.0 * v.radius,
+                z: [v.foot_z, top],
+            })
+            .collect(),
+        keys: f.keys.iter().map(|k| KeyReport { at: k.at.to_array() }).collect(),
+        key_diameter_mm: spec.mold.key_diameter,
+        bolts: f.bolts.iter().map(|b| b.to_array()).collect(),
+        parting_surface_triangles: mold.parting_triangles,
+        warnings: f.warnings.clone(),
+        failed: checks.iter().filter(|c| !c.passed).map(|c| c.name).collect(),
+        checks: checks.iter().map(CheckReport::from).collect(),
+    }
+}

@@ -1,0 +1,117 @@
+"""`moirecast mold` output checked by tools that share no code with
+moirecast: manifold3d (the C++ Manifold, through its Python binding) and
+trimesh. METHOD §7 items 1 and 4-7, measured on the written STL files."""
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+from conftest import BIN, ROOT, oracle
+
+# The mold builds take 13-30 s each (see the README); these two cover a
+# plane with a plateau ceiling and a curved surface with wall vents.
+MOLD_SPECS = [ROOT / "molds" / "plane-rings.toml", ROOT / "molds" / "cylinder-coins.toml"]
+IDS = [s.stem for s in MOLD_SPECS]
+PARTS = ["mold-top.stl", "mold-bottom.stl", "device.stl"]
+OVERLAP_MM3 = 1e-4
+
+
+@pytest.fixture(scope="session")
+def molds(tmp_path_factory):
+    cache = {}
+
+    def get(spec):
+        if spec.name not in cache:
+            out = tmp_path_factory.mktemp(spec.stem)
+            r = subprocess.run([str(BIN), "mold", str(spec), "-o", str(out), "--quiet"], capture_output=True, text=True)
+            assert r.returncode == 0, r.stderr
+            cache[spec.name] = (out, json.loads((out / "report.json").read_text()))
+        return cache[spec.name]
+
+    return get
+
+
+def manifold(path):
+    m3d = oracle("manifold3d")
+    trimesh = oracle("trimesh")
+    raw = trimesh.load(str(path), process=False)
+    mesh = m3d.Mesh(
+        vert_properties=np.asarray(raw.vertices, dtype=np.float32),
+        tri_verts=np.asarray(raw.faces, dtype=np.uint32),
+    )
+    mesh.merge()  # STL repeats vertices per facet: weld before loading
+    solid = m3d.Manifold(mesh)
+    assert solid.status() == m3d.Error.NoError, (path.name, solid.status())
+    return solid
+
+
+@pytest.mark.parametrize("spec", MOLD_SPECS, ids=IDS)
+def test_every_part_is_a_valid_solid(spec, molds):
+    trimesh = oracle("trimesh")
+    out, report = molds(spec)
+    assert report["failed"] == []
+    for name in PARTS:
+        solid = manifold(out / name)
+        assert solid.volume() > 0
+        assert solid.volume() == pytest.approx(report["files"][name]["volume_mm3"], rel=1e-6)
+        assert len(solid.decompose()) == 1, f"{name} is one piece"
+        mesh = trimesh.load(str(out / name))
+        assert mesh.is_watertight, name
+        assert mesh.is_winding_consistent, name
+        assert mesh.is_volume, name
+
+
+@pytest.mark.parametrize("spec", MOLD_SPECS, ids=IDS)
+def test_genus_counts_the_channels_through_each_half(spec, molds):
+    out, report = molds(spec)
+    assert manifold(out / "mold-top.stl").genus() == report["channels_through_top"]
+    assert report["channels_through_top"] == 1 + len(report["vents"]) + len(report["bolts"])
+    assert manifold(out / "mold-bottom.stl").genus() == report["channels_through_bottom"]
+
+
+@pytest.mark.parametrize("spec", MOLD_SPECS, ids=IDS)
+def test_parts_do_not_overlap_and_fill_the_block(spec, molds):
+    m3d = oracle("manifold3d")
+    out, report = molds(spec)
+    top, bottom, device = (manifold(out / n) for n in PARTS)
+    for a, b, what in [(top, bottom, "top ∩ bottom"), (top, device, "top ∩ device"), (bottom, device, "bottom ∩ device")]:
+        assert (a ^ b).volume() <= OVERLAP_MM3, what
+    lo, hi = np.array(report["block_min"]), np.array(report["block_max"])
+    block = float(np.prod(hi - lo))
+    total = top.volume() + bottom.volume() + device.volume() + report["volumes"]["channels_mm3"]
+    assert total == pytest.approx(block, rel=1e-6)
+    # The voids, measured here: the block less the three parts is exactly
+    # the channels and key clearances.
+    box = m3d.Manifold.cube(hi - lo).translate(lo)
+    voids = box - top - bottom - device
+    assert voids.volume() == pytest.approx(report["volumes"]["channels_mm3"], rel=1e-4, abs=1e-3)
+
+
+@pytest.mark.parametrize("spec", MOLD_SPECS, ids=IDS)
+def test_halves_release_along_z(spec, molds):
+    out, report = molds(spec)
+    top, bottom, device = (manifold(out / n) for n in PARTS)
+    height = report["block_max"][2] - report["block_min"][2]
+    for dz in [0.02, 0.2, 1.0, 5.0, height]:
+        assert (top.translate([0, 0, dz]) ^ device).volume() <= OVERLAP_MM3, f"top raised {dz} mm"
+        assert (bottom.translate([0, 0, -dz]) ^ device).volume() <= OVERLAP_MM3, f"bottom lowered {dz} mm"
+
+
+@pytest.mark.parametrize("spec", MOLD_SPECS, ids=IDS)
+def test_the_cavity_is_the_device(spec, molds):
+    """Points on the device's surface lie on the halves' cavity faces, to
+    within the tolerance, except in the gate's and vents' openings."""
+    trimesh = oracle("trimesh")
+    out, report = molds(spec)
+    device = trimesh.load(str(out / "device.stl"))
+    halves = trimesh.util.concatenate([trimesh.load(str(out / n)) for n in PARTS[:2]])
+    points, _ = trimesh.sample.sample_surface_even(device, 4000, seed=7)
+    keep = np.ones(len(points), dtype=bool)
+    for v in report["vents"]:
+        keep &= np.hypot(points[:, 0] - v["axis"][0], points[:, 1] - v["axis"][1]) > v["diameter_mm"] / 2 + 0.05
+    gate = np.array(report["gate"]["at"])
+    keep &= np.linalg.norm(points - gate, axis=1) > report["gate"]["diameter_mm"] / 2 + 0.05
+    _, distance, _ = trimesh.proximity.closest_point(halves, points[keep])
+    assert keep.sum() > 3500
+    assert distance.max() <= report["design"]["tolerance_mm"]
