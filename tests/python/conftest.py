@@ -22,6 +22,18 @@ def oracle(name):
         pytest.skip(f"oracle `{name}` is not installed: {e}")
 
 
+def tool(name):
+    """The path of an executable oracle. Under CI=true a missing one fails; elsewhere it skips."""
+    import shutil
+
+    path = shutil.which(name)
+    if path is None:
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"tool `{name}` is not installed under CI")
+        pytest.skip(f"tool `{name}` is not installed")
+    return path
+
+
 def build(spec, out):
     """Runs `moirecast device` and returns (stl path, report)."""
     if not BIN.exists():

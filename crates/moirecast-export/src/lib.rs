@@ -243,15 +243,26 @@ mod chunked_stl {
 /// `assembly.scad`: imports the device and both mold halves with colours.
 /// `exploded` (mm) pulls the halves apart; `mode = "check"` renders the
 /// pairwise intersections of the three parts, which are empty when the
-/// mold is right ("checking solids in OpenSCAD").
-pub fn assembly_scad(title: &str) -> String {
+/// mold is right ("checking solids in OpenSCAD"); `rebuild-top` and
+/// `rebuild-bottom` rebuild each half in OpenSCAD from the block, the
+/// device and the construction solids, to compare with ours.
+pub fn assembly_scad(title: &str, block_min: [f64; 3], block_size: [f64; 3]) -> String {
+    let v = |a: [f64; 3]| format!("[{:?}, {:?}, {:?}]", a[0], a[1], a[2]);
+    let (block_min, block_size) = (v(block_min), v(block_size));
     format!(
         r#"// {title}
 // Open in OpenSCAD. Customizer: `exploded` pulls the halves apart;
 // mode = "check" renders the pairwise intersections of the parts: an empty
-// result means no part overlaps another.
+// result means no part overlaps another. mode = "rebuild-top" (or
+// "rebuild-bottom") rebuilds a half from the block, device.stl and the
+// construction-*.stl solids.
 exploded = 0;        // [0:1:80]
-mode = "assembly";   // ["assembly", "check", "top", "bottom", "device"]
+mode = "assembly";   // ["assembly", "check", "top", "bottom", "device", "rebuild-top", "rebuild-bottom"]
+
+block_min = {block_min};
+block_size = {block_size};
+module block() {{ translate(block_min) cube(block_size); }}
+module construction(name) {{ import(str("construction-", name, ".stl"), convexity = 10); }}
 
 module top() {{ import("mold-top.stl", convexity = 10); }}
 module bottom() {{ import("mold-bottom.stl", convexity = 10); }}
@@ -267,6 +278,19 @@ if (mode == "check") {{
     bottom();
 }} else if (mode == "device") {{
     device();
+}} else if (mode == "rebuild-top") {{
+    difference() {{
+        intersection() {{ block(); construction("above"); }}
+        device();
+        construction("channels");
+        construction("key-sockets");
+    }}
+}} else if (mode == "rebuild-bottom") {{
+    difference() {{
+        union() {{ intersection() {{ block(); construction("below"); }} construction("key-bumps"); }}
+        device();
+        construction("channels");
+    }}
 }} else {{
     color([0.90, 0.55, 0.20, 0.55]) translate([0, 0, exploded]) top();
     color([0.25, 0.45, 0.80, 0.55]) translate([0, 0, -exploded]) bottom();

@@ -69,7 +69,11 @@ pub fn solid_checks(mesh: &Mesh) -> Vec<CheckResult> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolidSpec {
     /// Through-holes: 0 for a device; sprue, vents and bolts for a mold half.
+    /// Summed over the shells.
     pub genus: u32,
+    /// Connected shells: 1 for every part; more for a set of construction
+    /// solids (the key bumps, say).
+    pub shells: u32,
     /// Smallest triangle altitude (mm). Our own meshes keep
     /// [`MIN_ALTITUDE_MM`]; boolean results may hold thinner slivers where
     /// faces cross at a shallow angle, and are held to
@@ -86,13 +90,19 @@ pub const MIN_BOOLEAN_ALTITUDE_MM: f64 = 1e-9;
 impl SolidSpec {
     pub const DEVICE: SolidSpec = SolidSpec {
         genus: 0,
+        shells: 1,
         min_altitude: MIN_ALTITUDE_MM,
         f32_safe: false,
     };
     /// A mold half with `genus` through-holes.
     pub fn boolean_result(genus: u32) -> SolidSpec {
+        Self::boolean_results(genus, 1)
+    }
+    /// `shells` solids out of booleans, with `genus` holes among them.
+    pub fn boolean_results(genus: u32, shells: u32) -> SolidSpec {
         SolidSpec {
             genus,
+            shells,
             min_altitude: MIN_BOOLEAN_ALTITUDE_MM,
             f32_safe: true,
         }
@@ -195,17 +205,19 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
         .filter(|&v| used[v as usize] && find(&mut parent, v) == v)
         .count();
     let euler = vertices as i64 - undirected as i64 + mesh.triangles.len() as i64;
-    out.push(CheckResult::at_most(
-        "one-shell",
-        shells as f64,
-        1.0,
-        "shells",
-        format!(
+    out.push(CheckResult {
+        name: "shells",
+        value: shells as f64,
+        limit: spec.shells as f64,
+        unit: "shells",
+        passed: shells == spec.shells as usize,
+        detail: format!(
             "{shells} connected shells, {} unused vertices",
             mesh.positions.len() - vertices
         ),
-    ));
-    let measured_genus = (2 - euler) as f64 / 2.0;
+    });
+    // Summed over the shells: χ = Σ (2 − 2 g_i).
+    let measured_genus = (2 * shells as i64 - euler) as f64 / 2.0;
     out.push(CheckResult {
         name: "genus",
         value: measured_genus,

@@ -103,20 +103,42 @@ pub fn to_mesh(m: &Manifold) -> Traced {
     }
 }
 
+/// The nearest point with f32 coordinates. Every input of the booleans is
+/// snapped to f32 first, so that the STL files (which store f32) hold
+/// exactly what the halves were built from, and another tool rebuilding the
+/// halves from them starts from the same geometry; only new intersection
+/// vertices are rounded on writing. The snap moves a point by at most half
+/// an f32 step (under 4e-6 mm within 100 mm of the origin).
+pub fn f32_exact(p: DVec3) -> DVec3 {
+    p.as_vec3().as_dvec3()
+}
+
+fn snapped(m: Manifold) -> Manifold {
+    m.warp(|v| {
+        let q = f32_exact(DVec3::new(v.x, v.y, v.z));
+        *v = Vec3::new(q.x, q.y, q.z);
+    })
+}
+
 pub fn v3(p: DVec3) -> Vec3 {
     Vec3::new(p.x, p.y, p.z)
 }
 
 /// An axis-aligned box.
 pub fn cuboid(lo: DVec3, hi: DVec3) -> Result<Manifold> {
-    checked("box", Manifold::cube(v3(hi - lo), false).translate(v3(lo)))
+    checked(
+        "box",
+        snapped(Manifold::cube(v3(hi - lo), false).translate(v3(lo))),
+    )
 }
 
 /// A vertical frustum over `axis` from `z0` (radius `r0`) to `z1` (radius `r1`).
 pub fn vertical_frustum(axis: DVec2, z0: f64, z1: f64, r0: f64, r1: f64) -> Result<Manifold> {
     checked(
         "vertical channel",
-        Manifold::cylinder(z1 - z0, r0, r1, CIRCLE_SEGMENTS).translate(v3(axis.extend(z0))),
+        snapped(
+            Manifold::cylinder(z1 - z0, r0, r1, CIRCLE_SEGMENTS).translate(v3(axis.extend(z0))),
+        ),
     )
 }
 
@@ -126,10 +148,12 @@ pub fn horizontal_cylinder(from: DVec3, dir: DVec2, length: f64, r: f64) -> Resu
     let angle = dir.y.atan2(dir.x).to_degrees();
     checked(
         "runner",
-        Manifold::cylinder(length, r, r, CIRCLE_SEGMENTS)
-            .rotate(0.0, 90.0, 0.0)
-            .rotate(0.0, 0.0, angle)
-            .translate(v3(from)),
+        snapped(
+            Manifold::cylinder(length, r, r, CIRCLE_SEGMENTS)
+                .rotate(0.0, 90.0, 0.0)
+                .rotate(0.0, 0.0, angle)
+                .translate(v3(from)),
+        ),
     )
 }
 

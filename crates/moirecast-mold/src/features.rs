@@ -163,8 +163,10 @@ pub fn place(
     let outline = device.outline;
     let (lo, hi) = device.mesh.bounds();
     let tw = p.wall_thickness;
-    let block_lo = DVec3::new(outline.x0 - tw, outline.y0 - tw, lo.z - tw);
-    let block_hi = DVec3::new(outline.x1 + tw, outline.y1 + tw, hi.z + tw);
+    let block_lo =
+        crate::boolean::f32_exact(DVec3::new(outline.x0 - tw, outline.y0 - tw, lo.z - tw));
+    let block_hi =
+        crate::boolean::f32_exact(DVec3::new(outline.x1 + tw, outline.y1 + tw, hi.z + tw));
     let block = outline.grown(tw);
     let curve = |w: Wall| walls.iter().find(|c| c.wall == w).expect("four walls");
     let mut warnings = Vec::new();

@@ -24,7 +24,7 @@ use manifold_rust::manifold::Manifold;
 use moirecast_kernel::check::{solid_checks_for, solid_checks_of_genus, CheckResult, SolidSpec};
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{Design, DeviceMesh, Mesh};
-use parting::{Face, HeightQuery, PosedDevice};
+use parting::{Face, HeightQuery, PartSide, PosedDevice};
 use rayon::prelude::*;
 
 /// Mold volumes sum to the block's to this relative error (METHOD §7.4).
@@ -38,7 +38,7 @@ pub const CAVITY_ON_DEVICE_MM: f64 = 1e-6;
 /// Edges shorter than this (mm) that the booleans leave where the parting
 /// surface meets the device's walls are collapsed: far below any tolerance,
 /// and long enough that no triangle can flip when written as f32 STL.
-const SLIVER_MM: f64 = 1e-5;
+const SLIVER_MM: f64 = 1e-6;
 /// Bound on an opening's area on the device over its circle's area.
 const OPENING_SLACK: f64 = 1.5;
 /// How far (mm) the parting region and through-channels reach past the block.
@@ -82,6 +82,19 @@ pub struct Mold {
     pub parting_triangles: usize,
     /// Every invariant of METHOD §7 that concerns the mold, measured.
     pub checks: Vec<CheckResult>,
+    /// The solids the halves were made from, so that another tool can
+    /// rebuild the halves from them and the device (see `assembly.scad`).
+    pub construction: Vec<ConstructionSolid>,
+}
+
+/// A solid the halves were built from.
+pub struct ConstructionSolid {
+    /// "above" and "below" (the block on each side of the parting surface),
+    /// "channels" (runner, sprue, cone, vents, bolts), "key-bumps", "key-sockets".
+    pub name: &'static str,
+    pub mesh: Mesh,
+    /// Connected pieces it must have.
+    pub shells: u32,
 }
 
 /// Worst draft of the faces of one kind against `draw` (±z).
@@ -167,30 +180,33 @@ pub fn build_mold(
         (Some(a), Some(b)) => 0.5 * (a + b),
         _ => f64::NAN,
     };
-    let region = parting::upper_region(
-        &o,
-        &walls,
-        &interior_mid,
-        cells,
-        &features::block_rect(&f).grown(PAST_BLOCK_MM),
-        f.block_hi.z + PAST_BLOCK_MM,
+    let footprint = features::block_rect(&f);
+    let region = |cap_z: f64, side: PartSide| -> Result<Mesh> {
+        let mesh =
+            parting::parting_region(&o, &walls, &interior_mid, cells, &footprint, cap_z, side);
+        if let Some(c) = solid_checks_of_genus(&mesh, 0)
+            .into_iter()
+            .find(|c| !c.passed)
+        {
+            return Err(MoldError::NotSolid {
+                what: "parting region",
+                detail: format!("{side:?}: {}: {} ({})", c.name, c.value, c.detail),
+            });
+        }
+        Ok(mesh)
+    };
+    let (above_mesh, below_mesh) = (
+        region(f.block_hi.z, PartSide::Above)?,
+        region(f.block_lo.z, PartSide::Below)?,
     );
-    if let Some(c) = solid_checks_of_genus(&region, 0)
-        .into_iter()
-        .find(|c| !c.passed)
-    {
-        return Err(MoldError::NotSolid {
-            what: "parting region",
-            detail: format!("{}: {} ({})", c.name, c.value, c.detail),
-        });
-    }
     progress.tick(1);
 
     progress.stage("mold booleans", 1);
     let (dev, device_id) = boolean::to_traced_manifold("device", &posed.mesh)?;
-    let upper = to_manifold("parting region", &region)?;
+    let above = to_manifold("block above the parting surface", &above_mesh)?;
+    let below = to_manifold("block below the parting surface", &below_mesh)?;
     let block = cuboid(f.block_lo, f.block_hi)?;
-    let above = f.block_hi.z + PAST_BLOCK_MM;
+    let past_top = f.block_hi.z + PAST_BLOCK_MM;
     let g = &f.gate;
     let (from, dir, length) = features::runner_span(g);
     let mut fill = vec![
@@ -198,16 +214,16 @@ pub fn build_mold(
         vertical_frustum(
             g.sprue_axis,
             g.sprue_bottom_z,
-            above,
+            past_top,
             g.sprue_radius,
             g.sprue_radius,
         )?,
         {
             let floor = f.block_hi.z - g.cone_depth;
             let r_top = g.sprue_radius
-                + (g.cone_radius - g.sprue_radius) * (above - floor) / g.cone_depth.max(1e-9);
+                + (g.cone_radius - g.sprue_radius) * (past_top - floor) / g.cone_depth.max(1e-9);
             if g.cone_depth > 0.0 {
-                vertical_frustum(g.sprue_axis, floor, above, g.sprue_radius, r_top)?
+                vertical_frustum(g.sprue_axis, floor, past_top, g.sprue_radius, r_top)?
             } else {
                 Manifold::empty()
             }
@@ -215,7 +231,7 @@ pub fn build_mold(
     ];
     for v in &f.vents {
         fill.push(vertical_frustum(
-            v.axis, v.foot_z, above, v.radius, v.radius,
+            v.axis, v.foot_z, past_top, v.radius, v.radius,
         )?);
     }
     let fill = union_all("runner, sprue and vents", fill)?;
@@ -227,7 +243,7 @@ pub fn build_mold(
                 vertical_frustum(
                     b,
                     f.block_lo.z - PAST_BLOCK_MM,
-                    above,
+                    past_top,
                     p.bolt_diameter / 2.0,
                     p.bolt_diameter / 2.0,
                 )
@@ -260,31 +276,31 @@ pub fn build_mold(
     let sockets = union_all("key sockets", sockets)?;
     let channels = checked("channels", fill.union(&bolts))?;
     let top_block = checked(
-        "block above the parting surface",
-        block.intersection(&upper),
-    )?;
-    let top_block = checked(
         "top half before the cavity",
-        top_block.difference(&checked("channels and sockets", channels.union(&sockets))?),
+        above.difference(&checked("channels and sockets", channels.union(&sockets))?),
     )?;
-    let bottom_block = checked("block below the parting surface", block.difference(&upper))?;
     let bottom_block = checked(
         "bottom half before the cavity",
-        bottom_block.union(&bumps).difference(&channels),
+        below.union(&bumps).difference(&channels),
     )?;
+    let (top_exact, bottom_exact) = rayon::join(
+        || checked("top half", top_block.difference(&dev)),
+        || checked("bottom half", bottom_block.difference(&dev)),
+    );
+    let (top_exact, bottom_exact) = (top_exact?, bottom_exact?);
     let (top, bottom) = rayon::join(
-        || checked("top half", top_block.difference(&dev).simplify(SLIVER_MM)),
+        || checked("top half, slivers collapsed", top_exact.simplify(SLIVER_MM)),
         || {
             checked(
-                "bottom half",
-                bottom_block.difference(&dev).simplify(SLIVER_MM),
+                "bottom half, slivers collapsed",
+                bottom_exact.simplify(SLIVER_MM),
             )
         },
     );
     let (top, bottom) = (top?, bottom?);
     progress.tick(1);
 
-    progress.stage("checking the mold", 1);
+    progress.stage("mold solid checks", 1);
     let genus_top = 1 + f.vents.len() as u32 + f.bolts.len() as u32;
     let genus_bottom = f.bolts.len() as u32;
     let mut checks = Vec::new();
@@ -299,6 +315,8 @@ pub fn build_mold(
         }
     }
 
+    progress.tick(1);
+    progress.stage("mold volumes", 1);
     // §7.4 volumes. The voids are measured from the channel and key
     // primitives, independently of the halves.
     let (v_top, v_bottom) = (top_t.mesh.volume(), bottom_t.mesh.volume());
@@ -311,7 +329,7 @@ pub fn build_mold(
     )?;
     let clearances = checked(
         "key clearances",
-        sockets.intersection(&upper).difference(&bumps),
+        sockets.intersection(&above).difference(&bumps),
     )?;
     let v_voids = channels_in_block.volume() - channels_in_device.volume() + clearances.volume();
     let sum = v_top + v_bottom + v_device + v_voids;
@@ -323,15 +341,41 @@ pub fn build_mold(
         format!("top {v_top:.6} + bottom {v_bottom:.6} + device {v_device:.6} + voids {v_voids:.6} = {sum:.6} mm³; block {v_block:.6} mm³"),
     ));
 
-    // §7.5 overlaps, measured with fresh booleans.
-    let overlaps: Vec<(&str, f64)> = [
-        ("top ∩ bottom", &top, &bottom),
-        ("top ∩ device", &top, &dev),
-        ("bottom ∩ device", &bottom, &dev),
-    ]
-    .par_iter()
-    .map(|(name, a, b)| (*name, a.intersection(b).volume()))
-    .collect();
+    progress.tick(1);
+    progress.stage("mold overlaps", 1);
+    // §7.5 overlaps, by complementarity: each half was made as X − device,
+    // so it overlaps the device by exactly V(half) + V(X ∩ device) − V(X),
+    // with X ∩ device a fresh boolean. (Intersecting the halves with the
+    // device directly costs 20 s at 120 lenses: they share every cavity face.)
+    // Measured on the exact differences; collapsing slivers afterwards moves
+    // faces by at most SLIVER_MM, shared faces alike in both halves.
+    // The halves come from the blocks above and below the parting surface,
+    // which overlap by V(above) + V(below) − V(block), and meet again only
+    // where a key bump is not inside its socket.
+    let (top_in_device, bottom_in_device) = rayon::join(
+        || checked("top block ∩ device", top_block.intersection(&dev)),
+        || checked("bottom block ∩ device", bottom_block.intersection(&dev)),
+    );
+    let (top_in_device, bottom_in_device) = (top_in_device?, bottom_in_device?);
+    let bumps_out_of_sockets = checked(
+        "key bumps outside their sockets",
+        bumps.intersection(&above).difference(&sockets),
+    )?;
+    let overlaps: Vec<(&str, f64)> = vec![
+        (
+            "top ∩ bottom",
+            (above_mesh.volume() + below_mesh.volume() - v_block).abs()
+                + bumps_out_of_sockets.volume(),
+        ),
+        (
+            "top ∩ device",
+            (top_exact.volume() + top_in_device.volume() - top_block.volume()).abs(),
+        ),
+        (
+            "bottom ∩ device",
+            (bottom_exact.volume() + bottom_in_device.volume() - bottom_block.volume()).abs(),
+        ),
+    ];
     let worst = overlaps
         .iter()
         .copied()
@@ -348,6 +392,8 @@ pub fn build_mold(
             .join(", "),
     ));
 
+    progress.tick(1);
+    progress.stage("mold cavity checks", 1);
     // §7.6 the cavity is the device: faces traced back to the device lie on
     // their source triangles, and cover it but for the channel openings.
     let mut worst_off = 0.0f64;
@@ -393,6 +439,8 @@ pub fn build_mold(
         ),
     ));
 
+    progress.tick(1);
+    progress.stage("mold filling checks", 1);
     // §7.7 demoulding and filling.
     let draft = draft_top.degrees.min(draft_bottom.degrees);
     checks.push(CheckResult::at_least(
@@ -406,14 +454,20 @@ pub fn build_mold(
             draft_bottom.degrees, draft_bottom.at.x, draft_bottom.at.y, draft_bottom.at.z
         ),
     ));
-    let cast = checked("device with its channels", dev.union(&fill))?;
-    let pieces = cast.decompose().len();
+    // The void is connected when every connected piece of the channels
+    // (runner with sprue and cone; each vent) reaches into the cavity.
+    let reaching = fill
+        .decompose()
+        .iter()
+        .filter(|piece| piece.intersection(&channels_in_device).volume() > 0.0)
+        .count();
+    let pieces = 1 + fill.decompose().len() - reaching;
     checks.push(CheckResult::at_most(
         "cavity-reachable",
         pieces as f64,
         1.0,
         "connected pieces",
-        "the cavity, runner, sprue and every vent form one connected void".into(),
+        format!("{reaching} channel pieces (runner with sprue, and each vent) reach into the cavity; the void has {pieces} connected piece(s)"),
     ));
     let sprue_top = f.block_hi.z;
     let lowest_vent_top = f
@@ -444,12 +498,39 @@ pub fn build_mold(
             device: v_device,
             voids: v_voids,
         },
-        features: f,
+        features: f.clone(),
         draft_top,
         draft_bottom,
         genus_top,
         genus_bottom,
-        parting_triangles: region.triangles.len(),
+        parting_triangles: above_mesh.triangles.len(),
         checks,
+        construction: vec![
+            ConstructionSolid {
+                name: "above",
+                mesh: above_mesh,
+                shells: 1,
+            },
+            ConstructionSolid {
+                name: "below",
+                mesh: below_mesh,
+                shells: 1,
+            },
+            ConstructionSolid {
+                name: "channels",
+                mesh: to_mesh(&channels).mesh,
+                shells: 1 + f.vents.len() as u32 + f.bolts.len() as u32,
+            },
+            ConstructionSolid {
+                name: "key-bumps",
+                mesh: to_mesh(&bumps).mesh,
+                shells: f.keys.len() as u32,
+            },
+            ConstructionSolid {
+                name: "key-sockets",
+                mesh: to_mesh(&sockets).mesh,
+                shells: f.keys.len() as u32,
+            },
+        ],
     })
 }

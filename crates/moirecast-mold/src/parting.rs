@@ -129,7 +129,7 @@ impl PosedDevice {
             .mesh
             .positions
             .iter()
-            .map(|&p| pose(centre, flip, scale, p))
+            .map(|&p| crate::boolean::f32_exact(pose(centre, flip, scale, p)))
             .collect();
         let mesh = Mesh {
             positions,
@@ -166,11 +166,15 @@ impl PosedDevice {
             pose(centre, flip, scale, DVec3::new(ox0, -hh, 0.0)),
             pose(centre, flip, scale, DVec3::new(ox1, hh, 0.0)),
         );
+        let (lo, hi) = (
+            crate::boolean::f32_exact(a.min(b)),
+            crate::boolean::f32_exact(a.max(b)),
+        );
         let outline = Rect {
-            x0: a.x.min(b.x),
-            x1: a.x.max(b.x),
-            y0: a.y.min(b.y),
-            y1: a.y.max(b.y),
+            x0: lo.x,
+            x1: hi.x,
+            y0: lo.y,
+            y1: hi.y,
         };
         Ok(PosedDevice {
             mesh,
@@ -237,7 +241,7 @@ pub struct WallCurves {
     pub wall: Wall,
     pub upper: Polyline,
     pub lower: Polyline,
-    /// Through the midpoints of the wall's rungs: halfway up the meshed wall.
+    /// Halfway up the meshed wall: between the midpoints of the wall's rungs.
     pub mid: Polyline,
 }
 
@@ -300,7 +304,25 @@ pub fn wall_curves(device: &PosedDevice) -> Result<Vec<WallCurves>> {
                 }
             }
         }
-        let mid = polyline(wall, rungs, span)?;
+        let on_rungs = polyline(wall, rungs, span)?;
+        // The skirt's points lie between rungs, in the middle of a wall
+        // triangle's mid-line: clear of every wall edge, so no boolean
+        // vertex lands a rounding error away from one (inputs are snapped
+        // to f32, which would move a point that sat on a rung off it). The
+        // ends are the corners' vertical edges, which stay exact.
+        let n = on_rungs.t.len();
+        let mut between = Polyline::default();
+        for k in 0..n {
+            if k == 0 || k == n - 1 {
+                between.t.push(on_rungs.t[k]);
+                between.z.push(on_rungs.z[k]);
+            }
+            if k + 1 < n {
+                between.t.push(0.5 * (on_rungs.t[k] + on_rungs.t[k + 1]));
+                between.z.push(0.5 * (on_rungs.z[k] + on_rungs.z[k + 1]));
+            }
+        }
+        let mid = thinned(between, MIN_SKIRT_SPACING_MM);
         curves.push(WallCurves {
             wall,
             upper,
@@ -340,6 +362,35 @@ pub fn wall_curves(device: &PosedDevice) -> Result<Vec<WallCurves>> {
         }
     }
     Ok(curves)
+}
+
+/// Least spacing (mm) of the skirt's points along a wall. Rungs closer than
+/// this are skipped: between the points kept, the skirt still crosses the
+/// wall at mid-height, far from any wall vertex, and downstream tools
+/// (OpenSCAD, slicers) that weld nearby vertices see no near-duplicates.
+const MIN_SKIRT_SPACING_MM: f64 = 0.01;
+
+/// Drops points closer than `spacing` to the last point kept; the ends stay.
+fn thinned(p: Polyline, spacing: f64) -> Polyline {
+    let n = p.t.len();
+    let mut out = Polyline::default();
+    for k in 0..n {
+        let last = k == n - 1;
+        if let Some(&prev) = out.t.last() {
+            if p.t[k] - prev < spacing {
+                if !last {
+                    continue;
+                }
+                if out.t.len() > 1 {
+                    out.t.pop();
+                    out.z.pop();
+                }
+            }
+        }
+        out.t.push(p.t[k]);
+        out.z.push(p.z[k]);
+    }
+    out
 }
 
 /// How far a wall edge's ends may sit from the outline's corners: the
@@ -477,6 +528,7 @@ pub struct SolidBuilder {
 
 impl SolidBuilder {
     pub fn vertex(&mut self, p: DVec3) -> u32 {
+        let p = crate::boolean::f32_exact(p);
         let key = p.to_array().map(|c| (c + 0.0).to_bits());
         *self.index.entry(key).or_insert_with(|| {
             self.mesh.positions.push(p);
@@ -533,22 +585,37 @@ fn zip_strip(
     }
 }
 
-/// The region above the parting surface, as a closed solid over `footprint`
-/// (which must contain the block, with room to spare) up to `top_z`.
+/// Which side of the parting surface a region lies on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PartSide {
+    Above,
+    Below,
+}
+
+/// The block's part on one side of the parting surface, as a closed solid
+/// over `footprint` (the block's), from the parting surface to `cap_z` (the
+/// block's top or bottom face). Both parts share the parting surface's
+/// vertices exactly, so together they tile the block.
 ///
 /// Outside the outline its floor is the skirt: each wall's mid curve carried
 /// horizontally outward, flat over the corners. Inside, the floor runs
 /// through the device's interior (`interior_mid`, the mid height between the
 /// device's faces at a grid of points) and is cut away with the device.
-pub fn upper_region(
+pub fn parting_region(
     outline: &Rect,
     walls: &[WallCurves],
     interior_mid: &dyn Fn(DVec2) -> f64,
     cells: (usize, usize),
     footprint: &Rect,
-    top_z: f64,
+    cap_z: f64,
+    side: PartSide,
 ) -> Mesh {
-    let down = DVec3::NEG_Z;
+    // Outward from the region: through the parting surface, and through the cap.
+    let (down, cap_out) = match side {
+        PartSide::Above => (DVec3::NEG_Z, DVec3::Z),
+        PartSide::Below => (DVec3::Z, DVec3::NEG_Z),
+    };
+    let top_z = cap_z;
     let mut b = SolidBuilder::default();
     let curve = |w: Wall| walls.iter().find(|c| c.wall == w).expect("four walls");
     let on_wall = |w: Wall| -> Vec<DVec3> {
@@ -731,7 +798,7 @@ pub fn upper_region(
     let c = footprint.centre().extend(top_z);
     for k in 0..top_ring.len() {
         let (p, q) = (top_ring[k], top_ring[(k + 1) % top_ring.len()]);
-        b.triangle(c, p, q, DVec3::Z);
+        b.triangle(c, p, q, cap_out);
     }
     b.mesh
 }
