@@ -9,21 +9,11 @@ use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::Silent;
 use std::time::Instant;
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
+mod common;
+use common::median;
 
 fn main() {
-    let args: Vec<String> = std::env::args()
-        .skip(1)
-        .filter(|a| !a.starts_with("--"))
-        .collect();
-    let spec_path = args
-        .first()
-        .cloned()
-        .unwrap_or_else(|| concat!(env!("CARGO_MANIFEST_DIR"), "/molds/saddle-horse.toml").into());
-    let runs: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(9);
+    let (spec_path, runs) = common::spec_and_runs(9);
     let out = std::env::temp_dir().join(format!("moirecast-bench-{}", std::process::id()));
     std::fs::create_dir_all(&out).unwrap();
     let (mut load, mut mesh_t, mut stl_t, mut checks_t, mut total) =

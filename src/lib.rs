@@ -148,12 +148,7 @@ pub fn run_device(
     let report = report::device_report(spec, &build, &checks, stl.len());
     let mut files = OutputSet::new();
     files.add("device.stl", stl);
-    files.add(
-        "report.json",
-        (serde_json::to_string_pretty(&report)? + "\n").into_bytes(),
-    );
-    let bytes = files.sizes().iter().map(|(_, b)| b).sum();
-    let written = files.commit(out)?;
+    let (written, bytes) = commit_with_report(files, &report, out)?;
     progress.tick(1);
     Ok(DeviceOutcome {
         written,
@@ -166,6 +161,21 @@ pub fn run_device(
             .find(|c| c.name == "surface-to-mesh")
             .map_or(f64::NAN, |c| c.value),
     })
+}
+
+/// Adds `report.json` to `files` and writes them all (or none) into `out`;
+/// returns the paths written and their total size.
+fn commit_with_report(
+    mut files: OutputSet,
+    report: &impl serde::Serialize,
+    out: &Path,
+) -> Result<(Vec<PathBuf>, usize)> {
+    files.add(
+        "report.json",
+        (serde_json::to_string_pretty(report)? + "\n").into_bytes(),
+    );
+    let bytes = files.sizes().iter().map(|(_, b)| b).sum();
+    Ok((files.commit(out)?, bytes))
 }
 
 /// What `moirecast mold` wrote, for the summary it prints.
@@ -262,12 +272,7 @@ pub fn run_mold(
         .into_bytes(),
     );
     let report = mold_report::mold_report(spec, &mold, &checks, reports);
-    files.add(
-        "report.json",
-        (serde_json::to_string_pretty(&report)? + "\n").into_bytes(),
-    );
-    let bytes = files.sizes().iter().map(|(_, b)| b).sum();
-    let written = files.commit(out)?;
+    let (written, bytes) = commit_with_report(files, &report, out)?;
     progress.tick(1);
     Ok(MoldOutcome {
         written,

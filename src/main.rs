@@ -18,17 +18,8 @@ struct Cli {
 enum Command {
     /// Build the device: DIR/device.stl and DIR/report.json.
     Device {
-        /// The design spec (TOML). Without it, the embedded reference design (saddle + horse).
-        spec: Option<PathBuf>,
-        /// Output directory.
-        #[arg(short, long, default_value = "moirecast-out")]
-        out: PathBuf,
-        /// No progress bars.
-        #[arg(short, long)]
-        quiet: bool,
-        /// Print how long each stage took.
-        #[arg(short, long)]
-        verbose: bool,
+        #[command(flatten)]
+        run: RunArgs,
         /// Measure every vertex and lens triangle against the exact model
         /// (the default samples a few thousand; slower, same checks).
         #[arg(long)]
@@ -37,22 +28,30 @@ enum Command {
     /// Build the device and its two-piece casting mold: DIR/device.stl,
     /// DIR/mold-top.stl, DIR/mold-bottom.stl, DIR/assembly.scad and DIR/report.json.
     Mold {
-        /// The design spec (TOML), with an optional [mold] table. Without it, the reference design.
-        spec: Option<PathBuf>,
-        /// Output directory.
-        #[arg(short, long, default_value = "moirecast-out")]
-        out: PathBuf,
-        /// No progress bars.
-        #[arg(short, long)]
-        quiet: bool,
-        /// Print how long each stage took.
-        #[arg(short, long)]
-        verbose: bool,
+        #[command(flatten)]
+        run: RunArgs,
         /// Write the files even if a mold check fails, and mark the failure
         /// in report.json. Meshes that are not solids are never written.
         #[arg(long)]
         force: bool,
     },
+}
+
+/// What every command takes.
+#[derive(clap::Args)]
+struct RunArgs {
+    /// The design spec (TOML; `moirecast mold` reads its optional [mold]
+    /// table). Without it, the embedded reference design (saddle + horse).
+    spec: Option<PathBuf>,
+    /// Output directory.
+    #[arg(short, long, default_value = "moirecast-out")]
+    out: PathBuf,
+    /// No progress bars.
+    #[arg(short, long)]
+    quiet: bool,
+    /// Print how long each stage took.
+    #[arg(short, long)]
+    verbose: bool,
 }
 
 fn bars(quiet: bool, verbose: bool) -> Bars {
@@ -62,6 +61,26 @@ fn bars(quiet: bool, verbose: bool) -> Bars {
         bar: Mutex::new(None),
         stage_started: Mutex::new(None),
     }
+}
+
+/// The closing lines of a run: every file written, the size and the time.
+fn print_written(written: &[PathBuf], bytes: usize, started: std::time::Instant) {
+    for f in written {
+        eprintln!("wrote {}", f.display());
+    }
+    eprintln!(
+        "{:.1} MB in {:.2} s",
+        bytes as f64 / 1e6,
+        started.elapsed().as_secs_f64()
+    );
+}
+
+/// Progress bars, the start time, and the loaded spec.
+fn start(run: &RunArgs) -> Result<(Bars, std::time::Instant, moirecast_spec::Spec)> {
+    let bars = bars(run.quiet, run.verbose);
+    let started = std::time::Instant::now();
+    bars.stage("reading spec", 1);
+    Ok((bars, started, load_spec(&run.spec)?))
 }
 
 fn load_spec(spec: &Option<PathBuf>) -> Result<moirecast_spec::Spec> {
@@ -139,24 +158,18 @@ fn main() -> std::process::ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     let command = cli.command.unwrap_or(Command::Device {
-        spec: None,
-        out: PathBuf::from("moirecast-out"),
-        quiet: false,
-        verbose: false,
+        run: RunArgs {
+            spec: None,
+            out: PathBuf::from("moirecast-out"),
+            quiet: false,
+            verbose: false,
+        },
         full_checks: false,
     });
     match command {
-        Command::Device {
-            spec,
-            out,
-            quiet,
-            verbose,
-            full_checks,
-        } => {
-            let bars = bars(quiet, verbose);
-            let started = std::time::Instant::now();
-            bars.stage("reading spec", 1);
-            let spec = load_spec(&spec)?;
+        Command::Device { run, full_checks } => {
+            let (bars, started, spec) = start(&run)?;
+            let (out, quiet) = (run.out, run.quiet);
             let result = moirecast::run_device(
                 &spec,
                 &out,
@@ -183,27 +196,12 @@ fn run(cli: Cli) -> Result<()> {
                     d.tolerance.mm() * 1e3,
                     done.checks
                 );
-                for f in &done.written {
-                    eprintln!("wrote {}", f.display());
-                }
-                eprintln!(
-                    "{:.1} MB in {:.2} s",
-                    done.bytes as f64 / 1e6,
-                    started.elapsed().as_secs_f64()
-                );
+                print_written(&done.written, done.bytes, started);
             }
         }
-        Command::Mold {
-            spec,
-            out,
-            quiet,
-            verbose,
-            force,
-        } => {
-            let bars = bars(quiet, verbose);
-            let started = std::time::Instant::now();
-            bars.stage("reading spec", 1);
-            let spec = load_spec(&spec)?;
+        Command::Mold { run, force } => {
+            let (bars, started, spec) = start(&run)?;
+            let (out, quiet) = (run.out, run.quiet);
             let result = moirecast::run_mold(&spec, &out, force, &bars);
             bars.done();
             let done = result?;
@@ -221,14 +219,7 @@ fn run(cli: Cli) -> Result<()> {
                     done.triangles[1], done.triangles[2], done.triangles[0],
                     done.checks, done.failed.len()
                 );
-                for f in &done.written {
-                    eprintln!("wrote {}", f.display());
-                }
-                eprintln!(
-                    "{:.1} MB in {:.2} s",
-                    done.bytes as f64 / 1e6,
-                    started.elapsed().as_secs_f64()
-                );
+                print_written(&done.written, done.bytes, started);
             }
         }
     }

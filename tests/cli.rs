@@ -278,18 +278,21 @@ fn small_mold() -> String {
         .replace("tolerance = 0.004", "tolerance = 0.01")
 }
 
+/// The files `moirecast mold` writes besides the construction solids.
+const MOLD_FILES: [&str; 5] = [
+    "device.stl",
+    "mold-top.stl",
+    "mold-bottom.stl",
+    "assembly.scad",
+    "report.json",
+];
+
 #[test]
 fn a_small_mold_builds_with_every_file_and_check() {
     let dir = scratch("mold");
     let (ok, err, out) = run_command("mold", &small_mold(), &dir);
     assert!(ok, "{err}");
-    for f in [
-        "device.stl",
-        "mold-top.stl",
-        "mold-bottom.stl",
-        "assembly.scad",
-        "report.json",
-    ] {
+    for f in MOLD_FILES {
         assert!(out.join(f).exists(), "{f} missing");
     }
     let report = std::fs::read_to_string(out.join("report.json")).unwrap();
@@ -315,13 +318,7 @@ fn a_small_mold_builds_with_every_file_and_check() {
     let again = scratch("mold-again");
     let (ok, err, out2) = run_command("mold", &small_mold(), &again);
     assert!(ok, "{err}");
-    for f in [
-        "device.stl",
-        "mold-top.stl",
-        "mold-bottom.stl",
-        "assembly.scad",
-        "report.json",
-    ] {
+    for f in MOLD_FILES {
         assert!(
             std::fs::read(out.join(f)).unwrap() == std::fs::read(out2.join(f)).unwrap(),
             "{f} differs between runs"

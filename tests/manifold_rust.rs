@@ -5,20 +5,12 @@
 
 use manifold_rust::linalg::Vec3;
 use manifold_rust::manifold::Manifold;
-use manifold_rust::types::{Error, MeshGL64};
+use manifold_rust::types::Error;
 use moirecast_kernel::progress::Silent;
 use moirecast_kernel::*;
 
 fn to_manifold(mesh: &Mesh) -> Manifold {
-    let mut g = MeshGL64::default();
-    g.num_prop = 3;
-    g.vert_properties = mesh.positions.iter().flat_map(|p| p.to_array()).collect();
-    g.tri_verts = mesh
-        .triangles
-        .iter()
-        .flat_map(|t| t.map(u64::from))
-        .collect();
-    Manifold::from_mesh_gl64(&g)
+    moirecast_mold::boolean::to_manifold("device", mesh).unwrap()
 }
 
 fn design(surface: PitchSurface, profile: Profile, a: f64) -> Design {
