@@ -84,19 +84,6 @@ pub struct SolidSpec {
     pub f32_safe: bool,
 }
 
-/// Triangles that collapse or flip when their vertices are rounded to f32,
-/// as STL stores them.
-pub fn f32_unsafe_triangles(mesh: &Mesh) -> usize {
-    mesh.triangles
-        .par_iter()
-        .filter(|t| {
-            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
-            let [fa, fb, fc] = [a, b, c].map(|p| p.as_vec3().as_dvec3());
-            (b - a).cross(c - a).dot((fb - fa).cross(fc - fa)) <= 0.0
-        })
-        .count()
-}
-
 /// Smallest altitude (mm) of a triangle out of a boolean: not degenerate in f64.
 pub const MIN_BOOLEAN_ALTITUDE_MM: f64 = 1e-9;
 
@@ -280,7 +267,15 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
         .map(|t| mesh.positions[t[0] as usize])
         .unwrap_or_default();
     if spec.f32_safe {
-        let flipped = f32_unsafe_triangles(mesh);
+        let flipped = mesh
+            .triangles
+            .par_iter()
+            .filter(|t| {
+                let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+                let [fa, fb, fc] = [a, b, c].map(|p| p.as_vec3().as_dvec3());
+                (b - a).cross(c - a).dot((fb - fa).cross(fc - fa)) <= 0.0
+            })
+            .count();
         out.push(CheckResult::at_most(
             "f32-safe-triangles",
             flipped as f64,

@@ -21,9 +21,7 @@ use boolean::{
 };
 use glam::{DVec2, DVec3};
 use manifold_rust::manifold::Manifold;
-use moirecast_kernel::check::{
-    f32_unsafe_triangles, solid_checks_for, solid_checks_of_genus, CheckResult, SolidSpec,
-};
+use moirecast_kernel::check::{solid_checks_for, solid_checks_of_genus, CheckResult, SolidSpec};
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{Design, DeviceMesh, Mesh};
 use parting::{Face, HeightQuery, PartSide, PosedDevice};
@@ -37,10 +35,9 @@ pub const OVERLAP_MM3: f64 = 1e-4;
 /// any tolerance, so the cavity is within tolerance of the exact surface
 /// exactly when the device mesh is (METHOD §7.6).
 pub const CAVITY_ON_DEVICE_MM: f64 = 1e-6;
-/// Tolerance (mm) of manifold's `simplify`, run on a half only when some of
-/// its triangles would collapse or flip in f32 (STL): it collapses the
-/// slivers booleans leave where faces cross at a shallow angle. Far below
-/// any design tolerance.
+/// Edges shorter than this (mm) that the booleans leave where the parting
+/// surface meets the device's walls are collapsed: far below any tolerance,
+/// and long enough that no triangle can flip when written as f32 STL.
 const SLIVER_MM: f64 = 1e-6;
 /// Bound on an opening's area on the device over its circle's area.
 const OPENING_SLACK: f64 = 1.5;
@@ -291,26 +288,23 @@ pub fn build_mold(
         || checked("bottom half", bottom_block.difference(&dev)),
     );
     let (top_exact, bottom_exact) = (top_exact?, bottom_exact?);
-    // Slivers the booleans leave where faces cross at a shallow angle are
-    // collapsed only where they would not survive f32 (STL) rounding.
-    let finish = |what: &str, exact: &Manifold| -> Result<boolean::Traced> {
-        let traced = to_mesh(exact);
-        if f32_unsafe_triangles(&traced.mesh) == 0 {
-            return Ok(traced);
-        }
-        Ok(to_mesh(&checked(what, exact.simplify(SLIVER_MM))?))
-    };
-    let (top_t, bottom_t) = rayon::join(
-        || finish("top half, slivers collapsed", &top_exact),
-        || finish("bottom half, slivers collapsed", &bottom_exact),
+    let (top, bottom) = rayon::join(
+        || checked("top half, slivers collapsed", top_exact.simplify(SLIVER_MM)),
+        || {
+            checked(
+                "bottom half, slivers collapsed",
+                bottom_exact.simplify(SLIVER_MM),
+            )
+        },
     );
-    let (top_t, bottom_t) = (top_t?, bottom_t?);
+    let (top, bottom) = (top?, bottom?);
     progress.tick(1);
 
     progress.stage("mold solid checks", 1);
     let genus_top = 1 + f.vents.len() as u32 + f.bolts.len() as u32;
     let genus_bottom = f.bolts.len() as u32;
     let mut checks = Vec::new();
+    let (top_t, bottom_t) = (to_mesh(&top), to_mesh(&bottom));
     for (name, mesh, genus) in [
         ("top", &top_t.mesh, genus_top),
         ("bottom", &bottom_t.mesh, genus_bottom),
