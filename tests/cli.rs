@@ -305,6 +305,7 @@ fn a_small_mold_builds_with_every_file_and_check() {
         "cavity-reachable",
         "vents-not-below-sprue",
         "f32-safe-triangles",
+        "f32-distinct-vertices",
     ] {
         assert!(
             report.contains(&format!("\"name\": \"{name}\"")),

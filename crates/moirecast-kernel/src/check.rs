@@ -283,6 +283,21 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
             "triangles",
             "triangles that collapse or flip when rounded to f32 (STL)".into(),
         ));
+        // A reader that welds an STL by position (trimesh, slicers) would
+        // join two distinct vertices that round to the same f32 point.
+        let mut seen = std::collections::HashSet::with_capacity(mesh.positions.len());
+        let merged = mesh
+            .positions
+            .iter()
+            .filter(|p| !seen.insert(p.as_vec3().to_array().map(|c| (c + 0.0).to_bits())))
+            .count();
+        out.push(CheckResult::at_most(
+            "f32-distinct-vertices",
+            merged as f64,
+            0.0,
+            "vertices",
+            "vertices that round to the same f32 point as another vertex".into(),
+        ));
     }
     out.push(CheckResult::at_least(
         "no-degenerate-triangles",
