@@ -46,11 +46,7 @@ fn main() {
         total.push((t3 - t1).as_secs_f64());
     }
     let ms = |v: Vec<f64>| median(v) * 1e3;
-    println!("design            {spec_path}");
-    println!(
-        "runs              {runs} (medians; {} threads)",
-        rayon::current_num_threads()
-    );
+    common::print_header(&spec_path, runs);
     println!(
         "triangles         {} (a uniform grid needs {} for the same tolerance: {:.2}x)",
         triangles.0,

@@ -67,11 +67,7 @@ fn main() {
         outcome = Some(done);
     }
     let done = outcome.unwrap();
-    println!("design            {spec_path}");
-    println!(
-        "runs              {runs} (medians; {} threads)",
-        rayon::current_num_threads()
-    );
+    common::print_header(&spec_path, runs);
     println!(
         "triangles         device {}, top {}, bottom {}",
         done.triangles[0], done.triangles[1], done.triangles[2]

@@ -114,7 +114,8 @@ pub fn build_device_checked(
 }
 
 /// `moirecast device`: builds the device of `spec` and writes
-/// `device.stl` and `report.json` into `out` — all of them, or nothing.
+/// `device.stl`, `device.step` and `report.json` into `out` — all of them,
+/// or nothing.
 /// What `moirecast device` wrote, for the summary it prints.
 pub struct DeviceOutcome {
     pub written: Vec<PathBuf>,
@@ -133,21 +134,20 @@ pub fn run_device(
 ) -> Result<DeviceOutcome> {
     let build = build_device_checked(&spec.design, thoroughness, progress)?;
     let (checks, solid) = build.validated();
-    if let Some(c) = checks.iter().find(|c| !c.passed) {
-        bail!(
-            "check `{}` failed: measured {} {} against limit {} ({}); nothing was written",
-            c.name,
-            c.value,
-            c.unit,
-            c.limit,
-            c.detail
-        );
-    }
+    refuse_failed(&checks)?;
+    progress.stage("B-rep and STEP", 1);
+    let step = moirecast_brep::device_step(&spec.design, &build.mesh, "device.step")
+        .context("building the B-rep")?;
+    refuse_failed(&step.checks)?;
+    let mut checks = checks;
+    checks.extend(step.checks.iter().cloned());
+    progress.tick(1);
     progress.stage("writing", 1);
     let stl = stl_bytes("device.stl", solid.expect("the solid checks passed"))?;
-    let report = report::device_report(spec, &build, &checks, stl.len());
+    let report = report::device_report(spec, &build, &checks, stl.len(), &step);
     let mut files = OutputSet::new();
     files.add("device.stl", stl);
+    files.add("device.step", step.step.into_bytes());
     let (written, bytes) = commit_with_report(files, &report, out)?;
     progress.tick(1);
     Ok(DeviceOutcome {
@@ -161,6 +161,21 @@ pub fn run_device(
             .find(|c| c.name == "surface-to-mesh")
             .map_or(f64::NAN, |c| c.value),
     })
+}
+
+/// An error naming the first failed check and its evidence, if one failed.
+fn refuse_failed(checks: &[CheckResult]) -> Result<()> {
+    if let Some(c) = checks.iter().find(|c| !c.passed) {
+        bail!(
+            "check `{}` failed: measured {} {} against limit {} ({}); nothing was written",
+            c.name,
+            c.value,
+            c.unit,
+            c.limit,
+            c.detail
+        );
+    }
+    Ok(())
 }
 
 /// Adds `report.json` to `files` and writes them all (or none) into `out`;

@@ -16,7 +16,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Build the device: DIR/device.stl and DIR/report.json.
+    /// Build the device: DIR/device.stl, DIR/device.step (B-rep) and DIR/report.json.
     Device {
         #[command(flatten)]
         run: RunArgs,

@@ -143,7 +143,25 @@ pub struct DeviceReport {
     pub lenses: LensReport,
     pub base_shift_mm: MinMax,
     pub base_shift_periods: MinMax,
+    pub brep: BrepReport,
     pub checks: Vec<CheckReport>,
+}
+
+/// The device as a B-rep solid (`device.step`).
+#[derive(Serialize)]
+pub struct BrepReport {
+    pub step_bytes: usize,
+    #[serde(flatten)]
+    pub stats: moirecast_brep::BrepStats,
+}
+
+impl BrepReport {
+    pub fn of(step: &moirecast_brep::DeviceStep) -> Self {
+        BrepReport {
+            step_bytes: step.step.len(),
+            stats: step.brep.stats.clone(),
+        }
+    }
 }
 
 /// The spec's file name (no directories: reports and files stay byte-identical
@@ -195,6 +213,7 @@ pub fn device_report(
     build: &DeviceBuild,
     checks: &[CheckResult],
     stl_bytes: usize,
+    step: &moirecast_brep::DeviceStep,
 ) -> DeviceReport {
     let d = &spec.design;
     let s = &d.standard;
@@ -248,6 +267,7 @@ pub fn device_report(
             min: shift.min / t,
             max: shift.max / t,
         },
+        brep: BrepReport::of(step),
         checks: checks.iter().map(CheckReport::from).collect(),
     }
 }

@@ -96,6 +96,7 @@ fn a_small_design_builds_with_a_full_report() {
         "vertex-on-surface",
         "measured-afov",
         "genus",
+        "brep-surface-fit",
     ] {
         assert!(
             checks.iter().any(|c| c["name"] == name),
@@ -107,7 +108,14 @@ fn a_small_design_builds_with_a_full_report() {
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
-    assert_eq!(names.len(), 2, "{names:?}");
+    assert_eq!(names.len(), 3, "{names:?}");
+    // the B-rep: every lens a face, the walls, and a STEP file of that size
+    let brep = &report["brep"];
+    assert_eq!(brep["revealer_faces"], 8);
+    assert_eq!(brep["wall_faces"], 4);
+    let step = std::fs::read_to_string(out.join("device.step")).unwrap();
+    assert_eq!(brep["step_bytes"].as_u64().unwrap() as usize, step.len());
+    assert!(step.starts_with("ISO-10303-21;") && step.ends_with("END-ISO-10303-21;\n"));
 }
 
 #[test]
@@ -116,7 +124,7 @@ fn outputs_are_byte_identical_across_runs() {
     let (ok_a, _, out_a) = run(SMALL, &a);
     let (ok_b, _, out_b) = run(SMALL, &b);
     assert!(ok_a && ok_b);
-    for f in ["device.stl", "report.json"] {
+    for f in ["device.stl", "device.step", "report.json"] {
         let (x, y) = (
             std::fs::read(out_a.join(f)).unwrap(),
             std::fs::read(out_b.join(f)).unwrap(),

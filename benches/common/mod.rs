@@ -22,3 +22,12 @@ pub fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
 }
+
+/// The first lines of every benchmark's output.
+pub fn print_header(spec: &str, runs: usize) {
+    println!("design            {spec}");
+    println!(
+        "runs              {runs} (medians; {} threads)",
+        rayon::current_num_threads()
+    );
+}

@@ -161,9 +161,16 @@ impl Design {
             self.base_crease_u_near(k, v, near.0)?,
             self.base_crease_u_near(k + 1, v, near.1)?,
         );
+        Ok((self.base_arc_between(u0, u1, v), u0, u1))
+    }
+
+    /// The base arc whose creases lie at layout u0 and u1 (already solved)
+    /// at station v. Lets callers that share creases between neighbouring
+    /// lenses compute each crease once.
+    pub fn base_arc_between(&self, u0: f64, u1: f64, v: f64) -> LensArc {
         let (p0, p1) = (self.base_surface(u0, v), self.base_surface(u1, v));
         let toward = -self.base_normal(0.5 * (u0 + u1), v);
-        Ok((LensArc::new(p0, p1, toward, self.base_rule), u0, u1))
+        LensArc::new(p0, p1, toward, self.base_rule)
     }
 
     /// A point of base lens k: parameter t ∈ [0, 1] across, station v along.

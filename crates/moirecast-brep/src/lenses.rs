@@ -1,0 +1,302 @@
+//! One NURBS surface per lens (METHOD §2, §5.1).
+//!
+//! **Across** a lens (parameter t ∈ [0, 1]) every station's section is the
+//! exact arc as a rational quadratic: ends P0 and P1 with weight 1, and the
+//! tangents' intersection M + (w/2)·tan β·m with weight cos β.
+//! **Along** a lens (parameter v, the station) the homogeneous control points
+//! are interpolated by clamped C² cubics through shared stations, so at every
+//! station the section *is* the exact arc, and neighbouring lenses share
+//! their crease curve bit for bit (the crease is computed once).
+//!
+//! **Guarantee.** Stations are refined until, at the middle of every span and
+//! for every lens, the surface lies within `fit` of the exact arc of that
+//! station; a second, independent sample then measures the worst distance.
+
+use crate::error::BrepError;
+use crate::spline::{clamped_knots, interpolate};
+use moirecast_kernel::lens::LensArc;
+use moirecast_kernel::Design;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use truck_modeling::{BSplineSurface, KnotVec, NurbsSurface, Point3, Vector4};
+
+/// Homogeneous control points of one section: [P0, w·Pm, P1].
+type Section = [[f64; 4]; 3];
+
+/// Widest first spacing of the stations (mm); refinement halves spans.
+const FIRST_SPACING_MM: f64 = 2.0;
+/// Bisection rounds before giving up (a span of 2 mm / 2¹⁴ ≈ 0.1 µm).
+const MAX_ROUNDS: usize = 14;
+/// Across-lens parameters at which spans are tested while refining.
+const REFINE_T: [f64; 3] = [0.25, 0.5, 0.75];
+/// Span fractions and across-lens parameters of the final, independent sample.
+const VERIFY_S: [f64; 2] = [1.0 / 3.0, 2.0 / 3.0];
+const VERIFY_T: [f64; 4] = [0.1, 0.35, 0.6, 0.9];
+
+fn section(arc: &LensArc) -> Section {
+    let w = arc.half_angle.cos();
+    let mid = 0.5 * (arc.p0 + arc.p1) + 0.5 * arc.width() * arc.half_angle.tan() * arc.bulge;
+    [
+        [arc.p0.x, arc.p0.y, arc.p0.z, 1.0],
+        [w * mid.x, w * mid.y, w * mid.z, w],
+        [arc.p1.x, arc.p1.y, arc.p1.z, 1.0],
+    ]
+}
+
+/// Distance (mm) from `q` to the exact arc: to its circle within the arc's
+/// angular span, to the nearer end outside it.
+pub fn distance_to_arc(arc: &LensArc, q: glam::DVec3) -> f64 {
+    let c = arc.centre();
+    let normal = arc.chord_dir.cross(arc.bulge);
+    let d = q - c;
+    let off_plane = d.dot(normal);
+    let (x, y) = (d.dot(arc.chord_dir), d.dot(arc.bulge));
+    let angle = x.atan2(y);
+    if angle.abs() <= arc.half_angle {
+        let radial = (x * x + y * y).sqrt() - arc.radius;
+        (off_plane * off_plane + radial * radial).sqrt()
+    } else {
+        (q - arc.p0).length().min((q - arc.p1).length())
+    }
+}
+
+/// Which array a family of lens surfaces belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Array {
+    Revealer,
+    Base,
+}
+
+/// The lens surfaces of one array over shared stations.
+pub struct LensFamily {
+    pub array: Array,
+    pub stations: Vec<f64>,
+    /// Lens index → its surface (t ∈ [0, 1], v ∈ [first, last station]).
+    pub surfaces: BTreeMap<i64, NurbsSurface<Vector4>>,
+    /// Worst distance (mm) of the independent sample, and where (lens, t, v).
+    pub deviation: (f64, i64, f64, f64),
+}
+
+impl LensFamily {
+    /// Surfaces for `lenses` of `array` over `v_range`, each within `fit`
+    /// (mm) of the exact lenses at every tested point.
+    pub fn build(
+        design: &Design,
+        array: Array,
+        lenses: &[i64],
+        v_range: (f64, f64),
+        fit: f64,
+    ) -> Result<LensFamily, BrepError> {
+        let (lo, hi) = v_range;
+        let spans = ((hi - lo) / FIRST_SPACING_MM).ceil().max(2.0) as usize;
+        let mut stations: Vec<f64> = (0..=spans)
+            .map(|j| {
+                if j == spans {
+                    hi
+                } else {
+                    lo + (hi - lo) * j as f64 / spans as f64
+                }
+            })
+            .collect();
+        let exact = ExactSections { design, array };
+        let mut sections = exact.at(lenses, &stations)?;
+        for _ in 0..MAX_ROUNDS {
+            let surfaces = surfaces_of(lenses, &stations, &sections);
+            let mids: Vec<f64> = stations.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
+            let arcs = exact.arcs_at(lenses, &mids)?;
+            let failing: Vec<bool> = (0..mids.len())
+                .into_par_iter()
+                .map(|s| {
+                    lenses.iter().enumerate().any(|(l, k)| {
+                        let arc = &arcs[l][s];
+                        REFINE_T.iter().any(|&t| {
+                            distance_to_arc(arc, glam_of(surfaces[k].subs(t, mids[s]))) > fit
+                        })
+                    })
+                })
+                .collect();
+            if !failing.contains(&true) {
+                let deviation = verify(&exact, lenses, &stations, &surfaces)?;
+                return Ok(LensFamily {
+                    array,
+                    stations,
+                    surfaces,
+                    deviation,
+                });
+            }
+            let mut refined = Vec::with_capacity(stations.len() * 2);
+            for (s, w) in stations.windows(2).enumerate() {
+                refined.push(w[0]);
+                if failing[s] {
+                    refined.push(mids[s]);
+                }
+            }
+            refined.push(*stations.last().expect("two or more stations"));
+            // sections of the new stations only
+            let new: Vec<f64> = (0..mids.len())
+                .filter(|&s| failing[s])
+                .map(|s| mids[s])
+                .collect();
+            let new_sections = exact.at(lenses, &new)?;
+            sections = merge_sections(&stations, &sections, &new, &new_sections, &refined);
+            stations = refined;
+        }
+        Err(BrepError::SurfaceFit {
+            array,
+            stations: stations.len(),
+            fit_mm: fit,
+        })
+    }
+}
+
+fn glam_of(p: Point3) -> glam::DVec3 {
+    glam::DVec3::new(p.x, p.y, p.z)
+}
+
+/// The exact sections of one array, with base creases computed once per
+/// station and shared by the two lenses that meet there.
+struct ExactSections<'a> {
+    design: &'a Design,
+    array: Array,
+}
+
+impl ExactSections<'_> {
+    /// arcs[lens position][station]
+    fn arcs_at(&self, lenses: &[i64], stations: &[f64]) -> Result<Vec<Vec<LensArc>>, BrepError> {
+        let d = self.design;
+        let per_station: Vec<Vec<LensArc>> = stations
+            .par_iter()
+            .map(|&v| -> Result<Vec<LensArc>, BrepError> {
+                match self.array {
+                    Array::Revealer => Ok(lenses.iter().map(|&i| d.revealer_arc(i, v)).collect()),
+                    Array::Base => {
+                        let mut creases = BTreeMap::new();
+                        let mut near = None;
+                        for &k in lenses {
+                            for c in [k, k + 1] {
+                                if let std::collections::btree_map::Entry::Vacant(e) =
+                                    creases.entry(c)
+                                {
+                                    let u = d.base_crease_u_near(c, v, near)?;
+                                    near = Some(u + d.params.period);
+                                    e.insert(u);
+                                }
+                            }
+                        }
+                        Ok(lenses
+                            .iter()
+                            .map(|&k| d.base_arc_between(creases[&k], creases[&(k + 1)], v))
+                            .collect())
+                    }
+                }
+            })
+            .collect::<Result<_, _>>()?;
+        Ok((0..lenses.len())
+            .map(|l| per_station.iter().map(|s| s[l]).collect())
+            .collect())
+    }
+
+    /// sections[lens position][station]
+    fn at(&self, lenses: &[i64], stations: &[f64]) -> Result<Vec<Vec<Section>>, BrepError> {
+        Ok(self
+            .arcs_at(lenses, stations)?
+            .iter()
+            .map(|arcs| arcs.iter().map(section).collect())
+            .collect())
+    }
+}
+
+fn merge_sections(
+    old_stations: &[f64],
+    old: &[Vec<Section>],
+    new_stations: &[f64],
+    new: &[Vec<Section>],
+    merged: &[f64],
+) -> Vec<Vec<Section>> {
+    (0..old.len())
+        .map(|l| {
+            let (mut i, mut j) = (0, 0);
+            merged
+                .iter()
+                .map(|&v| {
+                    if i < old_stations.len() && old_stations[i] == v {
+                        i += 1;
+                        old[l][i - 1]
+                    } else {
+                        debug_assert_eq!(new_stations[j], v);
+                        j += 1;
+                        new[l][j - 1]
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}
+
+fn surfaces_of(
+    lenses: &[i64],
+    stations: &[f64],
+    sections: &[Vec<Section>],
+) -> BTreeMap<i64, NurbsSurface<Vector4>> {
+    let knots = (KnotVec::bezier_knot(2), clamped_knots(stations));
+    lenses
+        .par_iter()
+        .enumerate()
+        .map(|(l, &k)| {
+            let rows: Vec<Vec<Vector4>> = (0..3)
+                .map(|row| {
+                    let data: Vec<[f64; 4]> = sections[l].iter().map(|s| s[row]).collect();
+                    interpolate(stations, &data)
+                        .into_iter()
+                        .map(|c| Vector4::new(c[0], c[1], c[2], c[3]))
+                        .collect()
+                })
+                .collect();
+            (
+                k,
+                NurbsSurface::new(BSplineSurface::new(knots.clone(), rows)),
+            )
+        })
+        .collect()
+}
+
+/// The worst distance of an independent sample (other span fractions and
+/// other t than refinement used) from the exact arcs.
+fn verify(
+    exact: &ExactSections,
+    lenses: &[i64],
+    stations: &[f64],
+    surfaces: &BTreeMap<i64, NurbsSurface<Vector4>>,
+) -> Result<(f64, i64, f64, f64), BrepError> {
+    let sample_v: Vec<f64> = stations
+        .windows(2)
+        .flat_map(|w| VERIFY_S.map(|s| w[0] + s * (w[1] - w[0])))
+        .collect();
+    let arcs = exact.arcs_at(lenses, &sample_v)?;
+    let worst = lenses
+        .par_iter()
+        .enumerate()
+        .map(|(l, &k)| {
+            let mut worst = (0.0f64, k, 0.0, 0.0);
+            for (s, &v) in sample_v.iter().enumerate() {
+                for t in VERIFY_T {
+                    let d = distance_to_arc(&arcs[l][s], glam_of(surfaces[&k].subs(t, v)));
+                    if d > worst.0 {
+                        worst = (d, k, t, v);
+                    }
+                }
+            }
+            worst
+        })
+        .reduce(
+            || (0.0, i64::MIN, 0.0, 0.0),
+            |a, b| {
+                if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+                    b
+                } else {
+                    a
+                }
+            },
+        );
+    Ok(worst)
+}

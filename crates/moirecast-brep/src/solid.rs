@@ -1,0 +1,379 @@
+//! The device as a closed truck `Solid` (METHOD §5.1, §5.3).
+//!
+//! Faces: one NURBS face per connected piece of a lens (a base lens cut in
+//! two by a wall gives two), and one planar face per wall. Edges:
+//! - crease edges: the boundary curve that two neighbouring lens surfaces
+//!   share exactly, cut to the run's stations;
+//! - the outermost revealer creases, which lie in the x-walls: the same;
+//! - trims, where a wall cuts a lens: the C² cubic through the exact
+//!   intersection points the mesher solved, flattened into the wall plane;
+//! - wall corners: vertical lines.
+//!
+//! Every edge is one truck `Edge`, used by its two faces in opposite
+//! directions, so the shell is closed by construction; `ShellCondition`
+//! measures that.
+
+use crate::error::BrepError;
+use crate::lenses::{Array, LensFamily};
+use crate::spline::{clamped_knots, interpolate};
+use crate::topology::{pieces, Piece, Run};
+use glam::DVec3;
+use moirecast_kernel::mesher::{DeviceMesh, Patch, Side};
+use moirecast_kernel::model::LensRef;
+use moirecast_kernel::{Design, Tolerance};
+use std::collections::{BTreeMap, HashMap};
+use truck_modeling::{
+    BSplineCurve, Curve, Cut, Edge, Face, Line, ParametricSurface3D, Plane, Point3, Shell,
+    ShellCondition, Solid, Surface, Vertex, Wire,
+};
+
+/// Share of the mesh tolerance a lens surface may deviate from the exact
+/// lens: the rest is left for tessellating the B-rep (the cross-check).
+pub const FIT_SHARE: f64 = 0.1;
+/// Layout margin (mm) of the lens surfaces beyond the stations they are
+/// trimmed at, in lens periods: the trims stay clear of the surface edges.
+const MARGIN_PERIODS: f64 = 2.0;
+
+/// Counts and measurements of one B-rep (in `report.json` as `brep`).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct BrepStats {
+    pub faces: usize,
+    pub revealer_faces: usize,
+    pub base_faces: usize,
+    /// Base lenses that have a face (a lens cut in two has two faces).
+    pub base_lenses: usize,
+    pub wall_faces: usize,
+    pub edges: usize,
+    pub vertices: usize,
+    pub revealer_stations: usize,
+    pub base_stations: usize,
+    /// Worst sampled distance (mm) of a lens surface from its exact lens,
+    /// with the lens and the parameters (t across, v along) where it is.
+    pub max_surface_deviation_mm: f64,
+    pub worst_surface: String,
+    /// Limit for that distance: `FIT_SHARE` × tolerance.
+    pub surface_fit_mm: f64,
+}
+
+/// The device as a closed B-rep solid.
+pub struct DeviceBrep {
+    pub solid: Solid,
+    pub stats: BrepStats,
+    /// The lens surfaces the faces lie on.
+    pub revealer: LensFamily,
+    pub base: LensFamily,
+}
+
+fn point3(p: DVec3) -> Point3 {
+    Point3::new(p.x, p.y, p.z)
+}
+
+/// The plane a wall lies in, and its outward normal.
+fn wall_plane(design: &Design, side: Side) -> (DVec3, DVec3) {
+    let (xl, xr) = design.outline_x;
+    let h = design.half_height;
+    match side {
+        Side::Left => (DVec3::new(xl, 0.0, 0.0), DVec3::NEG_X),
+        Side::Right => (DVec3::new(xr, 0.0, 0.0), DVec3::X),
+        Side::Front => (DVec3::new(0.0, -h, 0.0), DVec3::NEG_Y),
+        Side::Back => (DVec3::new(0.0, h, 0.0), DVec3::Y),
+    }
+}
+
+/// Puts `p` exactly into the wall's plane.
+fn onto_wall(design: &Design, side: Side, p: DVec3) -> DVec3 {
+    let (o, n) = wall_plane(design, side);
+    if n.x != 0.0 {
+        DVec3::new(o.x, p.y, p.z)
+    } else {
+        DVec3::new(p.x, o.y, p.z)
+    }
+}
+
+fn lens_of(patch: Patch) -> Option<LensRef> {
+    match patch {
+        Patch::Lens(l) => Some(l),
+        Patch::Wall(_) => None,
+    }
+}
+
+fn family_key(lens: LensRef) -> (Array, i64) {
+    match lens {
+        LensRef::Revealer(i) => (Array::Revealer, i),
+        LensRef::Base(k) => (Array::Base, k),
+    }
+}
+
+/// Builds the B-rep of the device from the exact model, with the topology
+/// of the mesher's face partition. Every lens surface is within
+/// `FIT_SHARE × tolerance` of its exact lens at every sampled point, or this
+/// fails with [`BrepError::SurfaceFit`].
+pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepError> {
+    let tolerance: Tolerance = design.tolerance;
+    let pieces = pieces(dm)?;
+    // lenses with faces, and the station range their faces span (a
+    // coordinate of the parameter plane is extreme on a face's boundary)
+    let mut ranges: BTreeMap<(u8, i64), (f64, f64)> = BTreeMap::new();
+    for piece in &pieces {
+        let Some(lens) = lens_of(piece.patch) else {
+            continue;
+        };
+        let (array, k) = family_key(lens);
+        let entry = ranges
+            .entry((array as u8, k))
+            .or_insert((f64::INFINITY, f64::NEG_INFINITY));
+        for v in piece.loops.iter().flatten().flat_map(|run| &run.vertices) {
+            let pv = dm.origins[*v as usize].params_on(lens).ok_or_else(|| {
+                BrepError::Topology(format!(
+                    "vertex {v} on the boundary of {lens:?} has no parameters on it"
+                ))
+            })?;
+            entry.0 = entry.0.min(pv.y);
+            entry.1 = entry.1.max(pv.y);
+        }
+    }
+    let margin = MARGIN_PERIODS * design.params.period;
+    let fit = FIT_SHARE * tolerance.mm();
+    let family = |array: Array| -> Result<LensFamily, BrepError> {
+        let of: Vec<(&(u8, i64), &(f64, f64))> =
+            ranges.iter().filter(|(k, _)| k.0 == array as u8).collect();
+        let lenses: Vec<i64> = of.iter().map(|(k, _)| k.1).collect();
+        let lo = of.iter().map(|(_, r)| r.0).fold(f64::INFINITY, f64::min) - margin;
+        let hi = of
+            .iter()
+            .map(|(_, r)| r.1)
+            .fold(f64::NEG_INFINITY, f64::max)
+            + margin;
+        LensFamily::build(design, array, &lenses, (lo, hi), fit)
+    };
+    let (revealer, base) = rayon::join(|| family(Array::Revealer), || family(Array::Base));
+    let (revealer, base) = (revealer?, base?);
+    let surface_of = |lens: LensRef| match lens {
+        LensRef::Revealer(i) => &revealer.surfaces[&i],
+        LensRef::Base(k) => &base.surfaces[&k],
+    };
+
+    let mut vertices: HashMap<u32, Vertex> = HashMap::new();
+    let mut vertex = |v: u32| -> Vertex {
+        vertices
+            .entry(v)
+            .or_insert_with(|| Vertex::new(point3(dm.mesh.positions[v as usize])))
+            .clone()
+    };
+    let mut edges: HashMap<(u32, u32), Edge> = HashMap::new();
+    // Lens pieces first: every edge with a lens on one side takes its curve
+    // from the lens.
+    let mut order: Vec<usize> = (0..pieces.len()).collect();
+    order.sort_by_key(|&p| (lens_of(pieces[p].patch).is_none(), p));
+    let mut faces: Vec<Option<Face>> = vec![None; pieces.len()];
+    for &p in &order {
+        let piece = &pieces[p];
+        let mut wires = Vec::new();
+        for runs in &piece.loops {
+            let mut wire = Wire::new();
+            for run in runs {
+                let edge = match edges.get(&run.key()) {
+                    Some(e) if e.front().id() == vertex(*run.vertices.last().unwrap()).id() => {
+                        e.inverse()
+                    }
+                    Some(_) => {
+                        return Err(BrepError::Topology(format!(
+                            "edge {:?} is used twice in the same direction",
+                            run.key()
+                        )))
+                    }
+                    None => {
+                        let curve = edge_curve(
+                            design,
+                            dm,
+                            piece,
+                            &pieces[run.neighbour],
+                            run,
+                            &surface_of,
+                        )?;
+                        let (a, b) = (
+                            vertex(run.vertices[0]),
+                            vertex(*run.vertices.last().unwrap()),
+                        );
+                        let e = Edge::try_new(&a, &b, curve).map_err(|e| BrepError::Truck {
+                            what: "edge",
+                            detail: e.to_string(),
+                        })?;
+                        edges.insert(run.key(), e.clone());
+                        e
+                    }
+                };
+                wire.push_back(edge);
+            }
+            wires.push(wire);
+        }
+        faces[p] = Some(make_face(design, dm, piece, wires, &surface_of)?);
+    }
+    let faces: Vec<Face> = faces
+        .into_iter()
+        .map(|f| f.expect("every piece has a face"))
+        .collect();
+    let shell: Shell = faces.into();
+    let condition = shell.shell_condition();
+    if condition != ShellCondition::Closed {
+        return Err(BrepError::Truck {
+            what: "shell",
+            detail: format!("shell condition is {condition:?}, not Closed"),
+        });
+    }
+    let solid = Solid::try_new(vec![shell]).map_err(|e| BrepError::Truck {
+        what: "solid",
+        detail: e.to_string(),
+    })?;
+
+    let count = |f: &dyn Fn(&Piece) -> bool| pieces.iter().filter(|p| f(p)).count();
+    let base_lenses = ranges.keys().filter(|k| k.0 == Array::Base as u8).count();
+    let (deviation, worst) = [(&revealer, "revealer"), (&base, "base")]
+        .iter()
+        .map(|(f, name)| {
+            let (d, k, t, v) = f.deviation;
+            (d, format!("{name} lens {k} at t = {t:.2}, v = {v:.3} mm"))
+        })
+        .fold((0.0, String::new()), |a, b| if b.0 > a.0 { b } else { a });
+    let stats = BrepStats {
+        faces: pieces.len(),
+        revealer_faces: count(&|p| matches!(p.patch, Patch::Lens(LensRef::Revealer(_)))),
+        base_faces: count(&|p| matches!(p.patch, Patch::Lens(LensRef::Base(_)))),
+        base_lenses,
+        wall_faces: count(&|p| matches!(p.patch, Patch::Wall(_))),
+        edges: edges.len(),
+        vertices: vertices.len(),
+        revealer_stations: revealer.stations.len(),
+        base_stations: base.stations.len(),
+        max_surface_deviation_mm: deviation,
+        worst_surface: worst,
+        surface_fit_mm: fit,
+    };
+    Ok(DeviceBrep {
+        solid,
+        stats,
+        revealer,
+        base,
+    })
+}
+
+/// The curve of the edge along `run` (from its first vertex to its last),
+/// seen from `piece`; `other` is the piece across it.
+fn edge_curve<'s>(
+    design: &Design,
+    dm: &DeviceMesh,
+    piece: &Piece,
+    other: &Piece,
+    run: &Run,
+    surface_of: &dyn Fn(LensRef) -> &'s truck_modeling::NurbsSurface<truck_modeling::Vector4>,
+) -> Result<Curve, BrepError> {
+    let at = |v: u32| dm.mesh.positions[v as usize];
+    let (Some(lens), other_patch) = (lens_of(piece.patch), other.patch) else {
+        // wall against wall: a vertical corner line
+        let (a, b) = (at(run.vertices[0]), at(*run.vertices.last().unwrap()));
+        if run.vertices.len() != 2 {
+            return Err(BrepError::Topology(format!(
+                "wall corner from {a} to {b} has {} mesh vertices, expected 2",
+                run.vertices.len()
+            )));
+        }
+        return Ok(Curve::Line(Line(point3(a), point3(b))));
+    };
+    // On a crease of this lens (t = 0 or t = 1 at every vertex)?
+    let params: Vec<_> = run
+        .vertices
+        .iter()
+        .map(|&v| dm.origins[v as usize].params_on(lens))
+        .collect::<Option<Vec<_>>>()
+        .ok_or_else(|| BrepError::Topology(format!("run of {lens:?} leaves the lens")))?;
+    let on_crease = [0.0, 1.0]
+        .into_iter()
+        .find(|&t| params.iter().all(|p| p.x == t));
+    if let Some(t) = on_crease {
+        let surface = surface_of(lens);
+        let row = if t == 0.0 { 0 } else { 2 };
+        let ctrl = surface.control_points();
+        let points: Vec<Point3> = ctrl[row]
+            .iter()
+            .map(|h| Point3::new(h.x / h.w, h.y / h.w, h.z / h.w))
+            .collect();
+        let mut whole = BSplineCurve::new(surface.vknot_vec().clone(), points);
+        let (v0, v1) = (params[0].y, params.last().unwrap().y);
+        let (lo, hi) = (v0.min(v1), v0.max(v1));
+        let mut piece_curve = whole.cut(lo);
+        let _after = piece_curve.cut(hi);
+        if v0 > v1 {
+            piece_curve.invert();
+        }
+        return Ok(Curve::BSplineCurve(piece_curve));
+    }
+    let Patch::Wall(side) = other_patch else {
+        return Err(BrepError::Topology(format!(
+            "{lens:?} meets {:?} away from a crease",
+            other_patch
+        )));
+    };
+    // a trim: the cubic through the exact intersection points, in the wall
+    let pts: Vec<DVec3> = run
+        .vertices
+        .iter()
+        .map(|&v| onto_wall(design, side, at(v)))
+        .collect();
+    let mut s = vec![0.0];
+    for w in pts.windows(2) {
+        s.push(s.last().unwrap() + (w[1] - w[0]).length());
+    }
+    let data: Vec<[f64; 3]> = pts.iter().map(|p| p.to_array()).collect();
+    let ctrl: Vec<Point3> = interpolate(&s, &data)
+        .into_iter()
+        .map(|c| point3(onto_wall(design, side, DVec3::from_array(c))))
+        .collect();
+    Ok(Curve::BSplineCurve(BSplineCurve::new(
+        clamped_knots(&s),
+        ctrl,
+    )))
+}
+
+fn make_face<'s>(
+    design: &Design,
+    dm: &DeviceMesh,
+    piece: &Piece,
+    wires: Vec<Wire>,
+    surface_of: &dyn Fn(LensRef) -> &'s truck_modeling::NurbsSurface<truck_modeling::Vector4>,
+) -> Result<Face, BrepError> {
+    let refuse = |e: truck_topology::errors::Error| BrepError::Truck {
+        what: "face",
+        detail: format!("{:?}: {e}", piece.patch),
+    };
+    match piece.patch {
+        Patch::Wall(side) => {
+            let (o, n) = wall_plane(design, side);
+            // in-plane axes a, b with a × b = outward normal
+            let a = if n.x != 0.0 { DVec3::Z } else { DVec3::X };
+            let b = n.cross(a);
+            debug_assert!((a.cross(b) - n).length() < 1e-15);
+            let plane = Plane::new(point3(o), point3(o + a), point3(o + b));
+            Face::try_new(wires, Surface::Plane(plane)).map_err(refuse)
+        }
+        Patch::Lens(lens) => {
+            let surface = surface_of(lens);
+            // orientation: the surface's own normal against the triangle's
+            let tri = dm.mesh.triangles[piece.triangle as usize];
+            let [p0, p1, p2] = tri.map(|v| dm.mesh.positions[v as usize]);
+            let outward = (p1 - p0).cross(p2 - p0);
+            let pv = tri.map(|v| dm.origins[v as usize].params_on(lens).expect("checked"));
+            let c = (pv[0] + pv[1] + pv[2]) / 3.0;
+            let nat = surface.normal(c.x, c.y);
+            let natural_is_outward = outward.dot(DVec3::new(nat.x, nat.y, nat.z)) > 0.0;
+            let surface = Surface::NurbsSurface(surface.clone());
+            if natural_is_outward {
+                Face::try_new(wires, surface).map_err(refuse)
+            } else {
+                let reversed: Vec<Wire> = wires.iter().map(|w| w.inverse()).collect();
+                let mut face = Face::try_new(reversed, surface).map_err(refuse)?;
+                face.invert();
+                Ok(face)
+            }
+        }
+    }
+}

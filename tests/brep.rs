@@ -1,0 +1,102 @@
+//! The device as a B-rep (truck) and STEP, for every shipped spec: the
+//! shell is closed, the faces are the lenses and the walls, every face lies
+//! within the tolerance of its exact lens, and truck-stepio reads the STEP
+//! text back with the same faces.
+
+use moirecast_brep::{build_brep, read_back_faces, step_text};
+use moirecast_kernel::mesher::mesh_device;
+use moirecast_kernel::progress::Silent;
+use truck_modeling::{ParametricSurface, ShellCondition};
+
+fn shipped_specs() -> Vec<std::path::PathBuf> {
+    let mut specs: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/molds"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    specs.sort();
+    assert!(specs.len() >= 4, "the shipped specs are found");
+    specs
+}
+
+#[test]
+fn every_shipped_device_is_a_closed_brep_that_round_trips_through_step() {
+    for path in shipped_specs() {
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        let spec = moirecast_spec::load(&path).unwrap();
+        let design = &spec.design;
+        let dm = mesh_device(design, &Silent).unwrap();
+        let brep = build_brep(design, &dm).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let s = &brep.stats;
+
+        let shells = brep.solid.boundaries();
+        assert_eq!(shells.len(), 1, "{name}");
+        assert_eq!(
+            shells[0].shell_condition(),
+            ShellCondition::Closed,
+            "{name}"
+        );
+        assert_eq!(shells[0].len(), s.faces, "{name}");
+
+        // faces: every revealer lens, every piece of a base lens, four walls
+        assert_eq!(s.revealer_faces, design.lenses, "{name}");
+        assert_eq!(s.wall_faces, 4, "{name}");
+        assert!(
+            s.base_faces >= s.base_lenses && s.base_lenses >= design.lenses - 2,
+            "{name}: {s:?}"
+        );
+        assert_eq!(
+            s.faces,
+            s.revealer_faces + s.base_faces + s.wall_faces,
+            "{name}"
+        );
+        // Euler: V − E + F = 2 for one closed shell of disc faces
+        assert_eq!(
+            s.vertices as i64 - s.edges as i64 + s.faces as i64,
+            2,
+            "{name}: {s:?}"
+        );
+
+        let tol = design.tolerance.mm();
+        assert!(s.max_surface_deviation_mm <= tol, "{name}: {s:?}");
+
+        // An independent, denser sample of every tenth base lens, creases
+        // (t = 0, 1) included, against the exact arcs of the kernel.
+        let (lo, hi) = (brep.base.stations[0], *brep.base.stations.last().unwrap());
+        let mut worst: f64 = 0.0;
+        for (&k, surface) in brep.base.surfaces.iter().step_by(10) {
+            for j in 0..=400 {
+                let v = lo + (hi - lo) * j as f64 / 400.0;
+                let arc = design.base_arc(k, v).unwrap();
+                for t in [0.0, 0.05, 0.3, 0.5, 0.7, 0.95, 1.0] {
+                    let p = surface.subs(t, v);
+                    let q = glam::DVec3::new(p.x, p.y, p.z);
+                    worst = worst.max(moirecast_brep::lenses::distance_to_arc(&arc, q));
+                }
+            }
+        }
+        assert!(
+            worst <= tol,
+            "{name}: base faces {worst} mm from the exact lenses"
+        );
+
+        let text = step_text(&brep.solid, "device.step", "moirecast device");
+        assert_eq!(read_back_faces(&text).unwrap(), vec![s.faces], "{name}");
+        // FILE_NAME's author and organization are lists of strings: one
+        // pair of parentheses each (truck-stepio 0.3 writes two)
+        let file_name = text.lines().find(|l| l.starts_with("FILE_NAME(")).unwrap();
+        assert_eq!(
+            file_name,
+            format!(
+                "FILE_NAME('device.step', '2000-01-01T00:00:00', ('moirecast'), ('moirecast'), \
+                 'truck-stepio 0.3', 'moirecast {}', '');",
+                env!("CARGO_PKG_VERSION")
+            )
+        );
+        // deterministic: the same solid gives the same text
+        assert_eq!(
+            text,
+            step_text(&brep.solid, "device.step", "moirecast device")
+        );
+    }
+}
