@@ -126,10 +126,22 @@ pub struct DeviceOutcome {
     pub worst_surface_error_mm: f64,
 }
 
+/// Which path from the exact model to `device.stl`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Mesher {
+    /// Our mesher, straight from the exact model (the production mesh).
+    #[default]
+    Direct,
+    /// truck-meshalgo's tessellation of the B-rep, welded, and
+    /// cross-checked against the direct mesh (slow; an independent path).
+    Brep,
+}
+
 pub fn run_device(
     spec: &Spec,
     out: &Path,
     thoroughness: Thoroughness,
+    mesher: Mesher,
     progress: &dyn Progress,
 ) -> Result<DeviceOutcome> {
     let build = build_device_checked(&spec.design, thoroughness, progress)?;
@@ -142,9 +154,42 @@ pub fn run_device(
     let mut checks = checks;
     checks.extend(step.checks.iter().cloned());
     progress.tick(1);
+    let cross = match mesher {
+        Mesher::Direct => None,
+        Mesher::Brep => {
+            progress.stage("truck-meshalgo", 1);
+            let design = &spec.design;
+            let tol = design.tolerance.mm();
+            let mesh = moirecast_brep::tessellate(&step.brep.solid, tol)
+                .context("tessellating the B-rep with truck-meshalgo")?;
+            let cross = moirecast_brep::compare(&mesh, &build.mesh.mesh);
+            let verdicts = moirecast_brep::verdicts(&mesh, &cross, tol, lens_area(&build.mesh));
+            refuse_failed(&verdicts)?;
+            checks.extend(verdicts);
+            progress.tick(1);
+            Some((mesh, cross))
+        }
+    };
     progress.stage("writing", 1);
-    let stl = stl_bytes("device.stl", solid.expect("the solid checks passed"))?;
-    let report = report::device_report(spec, &build, &checks, stl.len(), &step);
+    let (stl, stl_mesh) = match &cross {
+        None => (
+            stl_bytes("device.stl", solid.expect("the solid checks passed"))?,
+            &build.mesh.mesh,
+        ),
+        Some((mesh, _)) => {
+            let (_, solid) = SolidMesh::validate(mesh);
+            let solid = solid.context("the welded tessellation passed brep-mesh-solid")?;
+            (stl_bytes("device.stl", solid)?, mesh)
+        }
+    };
+    let report = report::device_report(
+        spec,
+        &build,
+        &checks,
+        (stl_mesh, stl.len()),
+        &step,
+        cross.as_ref().map(|(_, c)| c),
+    );
     let mut files = OutputSet::new();
     files.add("device.stl", stl);
     files.add("device.step", step.step.into_bytes());
@@ -152,7 +197,7 @@ pub fn run_device(
     progress.tick(1);
     Ok(DeviceOutcome {
         written,
-        triangles: build.mesh.mesh.triangles.len(),
+        triangles: stl_mesh.triangles.len(),
         volume_mm3: report.files["device.stl"].volume_mm3,
         bytes,
         checks: checks.len(),
@@ -161,6 +206,17 @@ pub fn run_device(
             .find(|c| c.name == "surface-to-mesh")
             .map_or(f64::NAN, |c| c.value),
     })
+}
+
+/// Area (mm²) of the lens faces of the direct mesh.
+fn lens_area(dm: &DeviceMesh) -> f64 {
+    dm.mesh
+        .triangles
+        .iter()
+        .zip(&dm.patches)
+        .filter(|(_, p)| matches!(p, moirecast_kernel::mesher::Patch::Lens(_)))
+        .map(|(t, _)| dm.mesh.triangle_area(t))
+        .sum()
 }
 
 /// An error naming the first failed check and its evidence, if one failed.

@@ -24,6 +24,13 @@ enum Command {
         /// (the default samples a few thousand; slower, same checks).
         #[arg(long)]
         full_checks: bool,
+        /// `direct`: our mesher, straight from the exact model. `brep`:
+        /// truck-meshalgo's tessellation of the B-rep, welded and
+        /// cross-checked against the direct mesh (closed, within 2 ×
+        /// tolerance, volume within lens area × tolerance) before it is
+        /// written; slow, and it fails on designs with trimmed faces.
+        #[arg(long, value_enum, default_value = "direct")]
+        mesher: MesherArg,
     },
     /// Build the device and its two-piece casting mold: DIR/device.stl,
     /// DIR/mold-top.stl, DIR/mold-bottom.stl, DIR/assembly.scad and DIR/report.json.
@@ -35,6 +42,12 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum MesherArg {
+    Direct,
+    Brep,
 }
 
 /// What every command takes.
@@ -165,9 +178,14 @@ fn run(cli: Cli) -> Result<()> {
             verbose: false,
         },
         full_checks: false,
+        mesher: MesherArg::Direct,
     });
     match command {
-        Command::Device { run, full_checks } => {
+        Command::Device {
+            run,
+            full_checks,
+            mesher,
+        } => {
             let (bars, started, spec) = start(&run)?;
             let (out, quiet) = (run.out, run.quiet);
             let result = moirecast::run_device(
@@ -177,6 +195,10 @@ fn run(cli: Cli) -> Result<()> {
                     moirecast::Thoroughness::Full
                 } else {
                     moirecast::Thoroughness::Sampled
+                },
+                match mesher {
+                    MesherArg::Direct => moirecast::Mesher::Direct,
+                    MesherArg::Brep => moirecast::Mesher::Brep,
                 },
                 &bars,
             );

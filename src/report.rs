@@ -144,6 +144,10 @@ pub struct DeviceReport {
     pub base_shift_mm: MinMax,
     pub base_shift_periods: MinMax,
     pub brep: BrepReport,
+    /// With `--mesher brep`: truck-meshalgo's tessellation (then
+    /// `device.stl`) against the direct mesh.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub crosscheck: Option<moirecast_brep::CrossCheck>,
     pub checks: Vec<CheckReport>,
 }
 
@@ -212,8 +216,9 @@ pub fn device_report(
     spec: &Spec,
     build: &DeviceBuild,
     checks: &[CheckResult],
-    stl_bytes: usize,
+    (stl_mesh, stl_bytes): (&Mesh, usize),
     step: &moirecast_brep::DeviceStep,
+    crosscheck: Option<&moirecast_brep::CrossCheck>,
 ) -> DeviceReport {
     let d = &spec.design;
     let s = &d.standard;
@@ -224,7 +229,7 @@ pub fn device_report(
     let mut files = BTreeMap::new();
     files.insert(
         "device.stl".to_string(),
-        FileReport::of(&build.mesh.mesh, stl_bytes),
+        FileReport::of(stl_mesh, stl_bytes),
     );
     DeviceReport {
         moirecast: env!("CARGO_PKG_VERSION"),
@@ -268,6 +273,7 @@ pub fn device_report(
             max: shift.max / t,
         },
         brep: BrepReport::of(step),
+        crosscheck: crosscheck.cloned(),
         checks: checks.iter().map(CheckReport::from).collect(),
     }
 }

@@ -42,6 +42,11 @@ fn run(spec_text: &str, dir: &Path) -> (bool, String, PathBuf) {
 }
 
 fn run_command(command: &str, spec_text: &str, dir: &Path) -> (bool, String, PathBuf) {
+    run_with(&[command], spec_text, dir)
+}
+
+/// Runs `moirecast ARGS[0] SPEC -o DIR/out ARGS[1..] --quiet`.
+fn run_with(args: &[&str], spec_text: &str, dir: &Path) -> (bool, String, PathBuf) {
     let spec = dir.join("spec.toml");
     std::fs::write(&spec, spec_text).unwrap();
     std::fs::create_dir_all(dir.join("profiles")).unwrap();
@@ -52,10 +57,11 @@ fn run_command(command: &str, spec_text: &str, dir: &Path) -> (bool, String, Pat
     .unwrap();
     let out = dir.join("out");
     let o = Command::new(BIN)
-        .arg(command)
+        .arg(args[0])
         .arg(&spec)
         .arg("-o")
         .arg(&out)
+        .args(&args[1..])
         .arg("--quiet")
         .output()
         .unwrap();
@@ -131,6 +137,41 @@ fn outputs_are_byte_identical_across_runs() {
         );
         assert!(x == y, "{f} differs between runs");
     }
+}
+
+/// `--mesher brep`: truck-meshalgo's tessellation of the B-rep becomes
+/// device.stl once it is cross-checked. A plane without base shift has no
+/// trimmed faces and passes (at 2 µm); the saddle's trimmed faces do not,
+/// and the failed check is named and nothing is written.
+#[test]
+fn the_brep_mesher_is_cross_checked_before_it_is_written() {
+    let flat = SMALL
+        .replace("kind = \"saddle\"\nradius = 40.0", "kind = \"plane\"")
+        .replace("levels = 1.0", "levels = 0.0")
+        // at 4 µm truck-meshalgo leaves this one open too (384 edges)
+        .replace("tolerance = 0.004", "tolerance = 0.002");
+    let dir = scratch("brep-flat");
+    let (ok, err, out) = run_with(&["device", "--mesher", "brep"], &flat, &dir);
+    assert!(ok, "{err}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let cross = &report["crosscheck"];
+    let triangles = report["files"]["device.stl"]["triangles"].as_u64().unwrap();
+    assert_eq!(cross["brep_triangles"].as_u64().unwrap(), triangles);
+    assert!(cross["hausdorff_mm"].as_f64().unwrap() <= 2.0 * 0.002);
+    for name in ["brep-mesh-solid", "brep-mesh-hausdorff", "brep-mesh-volume"] {
+        let c = report["checks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["name"] == name);
+        assert_eq!(c.unwrap()["passed"], true, "{name}");
+    }
+
+    let dir = scratch("brep-saddle");
+    let (ok, err, out) = run_with(&["device", "--mesher", "brep"], SMALL, &dir);
+    assert!(!ok && err.contains("check `brep-mesh-"), "{err}");
+    assert!(!out.exists(), "nothing is written");
 }
 
 /// (what is wrong, the spec edit, the key the error must name, a phrase of the fix or problem)

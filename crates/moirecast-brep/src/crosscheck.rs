@@ -4,6 +4,7 @@
 
 use crate::error::BrepError;
 use glam::DVec3;
+use moirecast_kernel::check::CheckResult;
 use moirecast_kernel::measure::closest_on_triangle;
 use moirecast_kernel::Mesh;
 use rayon::prelude::*;
@@ -254,7 +255,7 @@ pub fn one_sided_distance(from: &Mesh, to: &Mesh) -> (f64, DVec3) {
 }
 
 /// How the B-rep's tessellation compares with the direct mesh.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct CrossCheck {
     pub brep_triangles: usize,
     pub brep_volume_mm3: f64,
@@ -282,6 +283,61 @@ pub fn compare(brep_mesh: &Mesh, direct: &Mesh) -> CrossCheck {
         hausdorff_mm: h,
         hausdorff_at: at.to_array(),
     }
+}
+
+/// The cross-check's verdicts, with their evidence:
+/// - `brep-mesh-solid`: the welded tessellation passes every solid check;
+/// - `brep-mesh-hausdorff`: it lies within 2 × tolerance of the direct mesh
+///   (each is within the tolerance of the exact surface);
+/// - `brep-mesh-volume`: the volumes differ by at most lens area ×
+///   tolerance, the most two meshes inscribed in the lenses within the
+///   tolerance can differ (their chordal deficits, measured 6.6e-4 of the
+///   volume at 2 µm on a 1.7 mm device, are not equal).
+pub fn verdicts(
+    brep_mesh: &Mesh,
+    cross: &CrossCheck,
+    tolerance: f64,
+    lens_area_mm2: f64,
+) -> Vec<CheckResult> {
+    let failed: Vec<String> = moirecast_kernel::check::solid_checks(brep_mesh)
+        .into_iter()
+        .filter(|c| !c.passed)
+        .map(|c| format!("{} = {} {} ({})", c.name, c.value, c.unit, c.detail))
+        .collect();
+    let at = cross.hausdorff_at;
+    vec![
+        CheckResult::at_most(
+            "brep-mesh-solid",
+            failed.len() as f64,
+            0.0,
+            "failed checks",
+            if failed.is_empty() {
+                format!("{} triangles, every solid check passed", cross.brep_triangles)
+            } else {
+                failed.join("; ")
+            },
+        ),
+        CheckResult::at_most(
+            "brep-mesh-hausdorff",
+            cross.hausdorff_mm,
+            2.0 * tolerance,
+            "mm",
+            format!(
+                "vertices and centroids of each mesh against the other; worst near ({:.3}, {:.3}, {:.3})",
+                at[0], at[1], at[2]
+            ),
+        ),
+        CheckResult::at_most(
+            "brep-mesh-volume",
+            cross.volume_rel_diff,
+            lens_area_mm2 * tolerance / cross.direct_volume_mm3.abs(),
+            "relative",
+            format!(
+                "{:.4} mm³ against the direct mesh's {:.4} mm³; limit: lens area {:.1} mm² × tolerance",
+                cross.brep_volume_mm3, cross.direct_volume_mm3, lens_area_mm2
+            ),
+        ),
+    ]
 }
 
 #[cfg(test)]

@@ -28,10 +28,10 @@ const FIRST_SPACING_MM: f64 = 2.0;
 /// Bisection rounds before giving up (a span of 2 mm / 2¹⁴ ≈ 0.1 µm).
 const MAX_ROUNDS: usize = 14;
 /// Across-lens parameters at which spans are tested while refining.
-const REFINE_T: [f64; 3] = [0.25, 0.5, 0.75];
+const REFINE_T: [f64; 5] = [0.1, 0.25, 0.5, 0.75, 0.9];
 /// Span fractions and across-lens parameters of the final, independent sample.
 const VERIFY_S: [f64; 2] = [1.0 / 3.0, 2.0 / 3.0];
-const VERIFY_T: [f64; 4] = [0.1, 0.35, 0.6, 0.9];
+const VERIFY_T: [f64; 4] = [0.05, 0.35, 0.6, 0.95];
 
 fn section(arc: &LensArc) -> Section {
     let w = arc.half_angle.cos();

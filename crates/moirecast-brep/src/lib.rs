@@ -14,7 +14,7 @@ pub mod spline;
 pub mod step;
 pub mod topology;
 
-pub use crosscheck::{compare, tessellate, CrossCheck};
+pub use crosscheck::{compare, tessellate, verdicts, CrossCheck};
 pub use error::BrepError;
 pub use solid::{build_brep, BrepStats, DeviceBrep};
 pub use step::{read_back_faces, step_text};
