@@ -21,6 +21,8 @@ pub mod model;
 pub mod profile;
 pub mod progress;
 pub mod solve;
+#[cfg(feature = "strategies")]
+pub mod strategies;
 pub mod surface;
 pub mod tolerance;
 
