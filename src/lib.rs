@@ -3,6 +3,7 @@
 //! draws progress.
 
 pub mod mold_report;
+pub mod render;
 pub mod report;
 
 use anyhow::{bail, Context, Result};
@@ -220,7 +221,7 @@ fn lens_area(dm: &DeviceMesh) -> f64 {
 }
 
 /// An error naming the first failed check and its evidence, if one failed.
-fn refuse_failed(checks: &[CheckResult]) -> Result<()> {
+pub(crate) fn refuse_failed(checks: &[CheckResult]) -> Result<()> {
     if let Some(c) = checks.iter().find(|c| !c.passed) {
         bail!(
             "check `{}` failed: measured {} {} against limit {} ({}); nothing was written",
@@ -236,7 +237,7 @@ fn refuse_failed(checks: &[CheckResult]) -> Result<()> {
 
 /// Adds `report.json` to `files` and writes them all (or none) into `out`;
 /// returns the paths written and their total size.
-fn commit_with_report(
+pub(crate) fn commit_with_report(
     mut files: OutputSet,
     report: &impl serde::Serialize,
     out: &Path,

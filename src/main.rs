@@ -32,6 +32,29 @@ enum Command {
         #[arg(long, value_enum, default_value = "direct")]
         mesher: MesherArg,
     },
+    /// Render the moiré over a tilt sweep before printing: DIR/frame-NN.png,
+    /// DIR/tilt.gif, DIR/sheet.png and DIR/report.json (fidelity per frame).
+    Render {
+        #[command(flatten)]
+        run: RunArgs,
+        /// Frame width and height in pixels.
+        #[arg(long, default_value_t = 256)]
+        size: usize,
+        /// Samples per pixel along each axis (stratified; 2 gives 4 per pixel).
+        #[arg(long, default_value_t = 2)]
+        samples: usize,
+        /// Tilts about the lens axis, degrees, comma-separated.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            allow_hyphen_values = true,
+            default_value = "-10,-7.5,-5,-2.5,0,2.5,5,7.5,10"
+        )]
+        tilts: Vec<f64>,
+        /// Seed of the sample jitter: the same seed gives the same frames.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
     /// Build the device and its two-piece casting mold: DIR/device.stl,
     /// DIR/mold-top.stl, DIR/mold-bottom.stl, DIR/assembly.scad and DIR/report.json.
     Mold {
@@ -218,6 +241,38 @@ fn run(cli: Cli) -> Result<()> {
                     d.tolerance.mm() * 1e3,
                     done.checks
                 );
+                print_written(&done.written, done.bytes, started);
+            }
+        }
+        Command::Render {
+            run,
+            size,
+            samples,
+            tilts,
+            seed,
+        } => {
+            if size == 0 || size > 4096 || samples == 0 || samples > 16 || tilts.is_empty() {
+                anyhow::bail!(
+                    "--size must be 1..=4096 (got {size}), --samples 1..=16 (got {samples}), and --tilts must name at least one angle"
+                );
+            }
+            if let Some(t) = tilts.iter().find(|t| !t.is_finite() || t.abs() >= 60.0) {
+                anyhow::bail!("--tilts: {t} is not a tilt in (-60, 60) degrees");
+            }
+            let (bars, started, spec) = start(&run)?;
+            let options = moirecast::render::RenderOptions {
+                size,
+                samples,
+                tilts_deg: tilts,
+                seed,
+            };
+            let result = moirecast::render::run_render(&spec, &run.out, &options, &bars);
+            bars.done();
+            let done = result?;
+            if !run.quiet {
+                for (tilt, f) in &done.fidelity {
+                    eprintln!("tilt {tilt:+6.1}°: fidelity {f:.3}");
+                }
                 print_written(&done.written, done.bytes, started);
             }
         }

@@ -1,0 +1,119 @@
+//! One frame: an orthographic view of the device, tilted, lit by a lateral
+//! area light below it (the dual-lens moiré selects the direction light
+//! comes from), with stratified supersampling. Deterministic for a seed.
+
+use crate::scene::Scene;
+use crate::trace::{radiance, SplitMix64};
+use glam::{DMat3, DVec3};
+use moirecast_kernel::{Design, Mesh, PitchSurface};
+use rayon::prelude::*;
+
+/// How to render one frame.
+#[derive(Clone, Copy, Debug)]
+pub struct View {
+    pub width: usize,
+    pub height: usize,
+    /// Samples per pixel along each axis (n × n, stratified).
+    pub samples: usize,
+    /// Tilt about the lens axis (y), radians: the tilt that makes the moiré beat.
+    pub tilt_across: f64,
+    /// Tilt about the x axis, radians.
+    pub tilt_along: f64,
+    pub seed: u64,
+}
+
+/// A rendered frame and, per pixel, the elevation phase frac(A·e) of the
+/// layout point the pixel sees (NaN where it misses the device).
+pub struct Frame {
+    pub width: usize,
+    pub height: usize,
+    pub luminance: Vec<f64>,
+    pub phase: Vec<f64>,
+    /// Pixels per lens period.
+    pub period_px: f64,
+}
+
+/// Half-width (as a direction's x component) of the ramp between dark and
+/// lit: the area light fills the directions with x > 0 below the device.
+const LIGHT_EDGE: f64 = 0.15;
+
+/// The lateral light: directions leaving the device downwards and towards
+/// +x are lit, those towards −x dark, with a soft edge; nothing above.
+pub fn lateral_light(d: DVec3) -> f64 {
+    if d.z >= 0.0 {
+        return 0.0;
+    }
+    (0.5 + 0.5 * d.x / LIGHT_EDGE).clamp(0.0, 1.0)
+}
+
+/// Layout (u, v) of a point on the device's top seen at (x, y).
+fn layout_of(design: &Design, x: f64, y: f64) -> (f64, f64) {
+    match design.params.surface {
+        PitchSurface::Cylinder { radius } => (radius * (x / radius).clamp(-1.0, 1.0).asin(), y),
+        _ => (x, y),
+    }
+}
+
+pub fn render(design: &Design, mesh: &Mesh, view: View) -> Frame {
+    let scene = Scene::new(mesh);
+    let (lo, hi) = mesh.bounds();
+    let rot = DMat3::from_rotation_y(view.tilt_across) * DMat3::from_rotation_x(view.tilt_along);
+    let dir = rot * DVec3::NEG_Z;
+    let (du, dv) = (rot * DVec3::X, rot * DVec3::Y);
+    let centre = 0.5 * (lo + hi);
+    let extent = (hi - lo).x.max((hi - lo).y);
+    let pixel = extent / view.width.max(view.height) as f64;
+    let back = (hi - lo).length() + 1.0;
+    let levels = design.params.base.levels;
+    let n = view.samples.max(1);
+    let pixels: Vec<(f64, f64)> = (0..view.width * view.height)
+        .into_par_iter()
+        .map(|p| {
+            let (px, py) = (p % view.width, p / view.width);
+            let mut rng = SplitMix64(view.seed ^ (p as u64).wrapping_mul(0x2545_F491_4F6C_DD1D));
+            let mut sum = 0.0;
+            for s in 0..n * n {
+                let (sx, sy) = (s % n, s / n);
+                let fx =
+                    (px as f64 + (sx as f64 + rng.next_f64()) / n as f64) / view.width as f64 - 0.5;
+                let fy = 0.5
+                    - (py as f64 + (sy as f64 + rng.next_f64()) / n as f64) / view.height as f64;
+                let target = centre
+                    + du * (fx * pixel * view.width as f64)
+                    + dv * (fy * pixel * view.height as f64);
+                sum += radiance(
+                    &scene,
+                    design.params.lens.index,
+                    target - back * dir,
+                    dir,
+                    &lateral_light,
+                    &mut rng,
+                );
+            }
+            // the phase at the pixel centre, from where its central ray meets the device
+            let fx = (px as f64 + 0.5) / view.width as f64 - 0.5;
+            let fy = 0.5 - (py as f64 + 0.5) / view.height as f64;
+            let target = centre
+                + du * (fx * pixel * view.width as f64)
+                + dv * (fy * pixel * view.height as f64);
+            let origin = target - back * dir;
+            let phase = match scene.intersect(origin, dir, 0.0) {
+                Some(hit) if hit.normal.z > 0.0 => {
+                    let q = origin + hit.t * dir;
+                    let (u, v) = layout_of(design, q.x, q.y);
+                    (levels * design.params.profile.value(u, v)).rem_euclid(1.0)
+                }
+                _ => f64::NAN,
+            };
+            (sum / (n * n) as f64, phase)
+        })
+        .collect();
+    let (luminance, phase) = pixels.into_iter().unzip();
+    Frame {
+        width: view.width,
+        height: view.height,
+        luminance,
+        phase,
+        period_px: design.params.period / pixel,
+    }
+}

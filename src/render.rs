@@ -1,0 +1,172 @@
+//! `moirecast render`: the moiré of a design over a tilt sweep, before
+//! anything is printed: `frame-NN.png`, `tilt.gif`, `sheet.png` and
+//! `report.json` with the fidelity of every frame (METHOD §8).
+
+use crate::{commit_with_report, refuse_failed};
+use anyhow::{Context, Result};
+use image::ImageEncoder;
+use moirecast_export::OutputSet;
+use moirecast_kernel::check::SolidMesh;
+use moirecast_kernel::mesher::mesh_device;
+use moirecast_kernel::progress::Progress;
+use moirecast_render::frame::{render, View};
+use moirecast_render::sheet::{contact_sheet, to_gray, Gray};
+use moirecast_spec::Spec;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// What to render.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    /// Frame width and height (pixels).
+    pub size: usize,
+    /// Samples per pixel along each axis.
+    pub samples: usize,
+    /// Tilts about the lens axis (degrees), one frame each.
+    pub tilts_deg: Vec<f64>,
+    pub seed: u64,
+}
+
+#[derive(Serialize)]
+struct FrameReport {
+    file: String,
+    tilt_deg: f64,
+    fidelity: f64,
+    mean_luminance: f64,
+}
+
+#[derive(Serialize)]
+struct RenderReport {
+    moirecast: &'static str,
+    spec: String,
+    size_px: usize,
+    samples_per_pixel: usize,
+    seed: u64,
+    pixels_per_period: f64,
+    light: &'static str,
+    frames: Vec<FrameReport>,
+    best_frame: usize,
+    best_fidelity: f64,
+}
+
+/// What `moirecast render` wrote.
+pub struct RenderOutcome {
+    pub written: Vec<PathBuf>,
+    pub bytes: usize,
+    /// (tilt in degrees, fidelity) per frame.
+    pub fidelity: Vec<(f64, f64)>,
+}
+
+fn png(gray: &Gray) -> Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut bytes).write_image(
+        &gray.pixels,
+        gray.width as u32,
+        gray.height as u32,
+        image::ExtendedColorType::L8,
+    )?;
+    Ok(bytes)
+}
+
+fn gif(frames: &[Gray]) -> Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    {
+        let mut encoder = image::codecs::gif::GifEncoder::new_with_speed(&mut bytes, 10);
+        encoder.set_repeat(image::codecs::gif::Repeat::Infinite)?;
+        for g in frames {
+            let rgba: Vec<u8> = g.pixels.iter().flat_map(|&v| [v, v, v, 255]).collect();
+            let buffer = image::RgbaImage::from_raw(g.width as u32, g.height as u32, rgba)
+                .context("frame buffer")?;
+            encoder.encode_frame(image::Frame::from_parts(
+                buffer,
+                0,
+                0,
+                image::Delay::from_numer_denom_ms(150, 1),
+            ))?;
+        }
+    }
+    Ok(bytes)
+}
+
+pub fn run_render(
+    spec: &Spec,
+    out: &Path,
+    options: &RenderOptions,
+    progress: &dyn Progress,
+) -> Result<RenderOutcome> {
+    let design = &spec.design;
+    let dm = mesh_device(design, progress).context("meshing the device")?;
+    let (checks, _) = SolidMesh::validate(&dm.mesh);
+    refuse_failed(&checks)?;
+    progress.stage("rendering", options.tilts_deg.len() as u64);
+    let mut files = OutputSet::new();
+    let (mut grays, mut reports) = (Vec::new(), Vec::new());
+    let mut period_px = 0.0;
+    for (i, &tilt) in options.tilts_deg.iter().enumerate() {
+        let frame = render(
+            design,
+            &dm.mesh,
+            View {
+                width: options.size,
+                height: options.size,
+                samples: options.samples,
+                tilt_across: tilt.to_radians(),
+                tilt_along: 0.0,
+                seed: options.seed,
+            },
+        );
+        period_px = frame.period_px;
+        let fidelity = moirecast_render::fidelity(
+            &frame.luminance,
+            &frame.phase,
+            frame.width,
+            frame.height,
+            frame.period_px,
+        );
+        let gray = to_gray(frame.width, frame.height, &frame.luminance);
+        let name = format!("frame-{i:02}.png");
+        files.add(&name, png(&gray)?);
+        reports.push(FrameReport {
+            file: name,
+            tilt_deg: tilt,
+            fidelity,
+            mean_luminance: frame.luminance.iter().sum::<f64>() / frame.luminance.len() as f64,
+        });
+        grays.push(gray);
+        progress.tick(1);
+    }
+    let labelled: Vec<(Gray, String)> = grays
+        .iter()
+        .zip(&reports)
+        .map(|(g, r)| (g.clone(), format!("{:+.1}°", r.tilt_deg)))
+        .collect();
+    let columns = (labelled.len() as f64).sqrt().ceil() as usize;
+    files.add("sheet.png", png(&contact_sheet(&labelled, columns))?);
+    files.add("tilt.gif", gif(&grays)?);
+    let best = reports.iter().enumerate().fold(0, |b, (i, r)| {
+        if r.fidelity > reports[b].fidelity {
+            i
+        } else {
+            b
+        }
+    });
+    let fidelity = reports.iter().map(|r| (r.tilt_deg, r.fidelity)).collect();
+    let report = RenderReport {
+        moirecast: env!("CARGO_PKG_VERSION"),
+        spec: crate::report::spec_name(spec),
+        size_px: options.size,
+        samples_per_pixel: options.samples * options.samples,
+        seed: options.seed,
+        pixels_per_period: period_px,
+        light: "orthographic view; lateral area light below the device, lit towards +x (soft edge ±0.15 in direction x)",
+        best_frame: best,
+        best_fidelity: reports.get(best).map_or(0.0, |r| r.fidelity),
+        frames: reports,
+    };
+    let (written, bytes) = commit_with_report(files, &report, out)?;
+    Ok(RenderOutcome {
+        written,
+        bytes,
+        fidelity,
+    })
+}
