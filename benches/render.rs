@@ -1,0 +1,65 @@
+//! Benchmark of `moirecast render` on the reference design (or SPEC):
+//! the scene (BVH) build, and one frame at 256 × 256 and at 512 × 512 with
+//! one sample per pixel, as medians over repeated runs.
+//!
+//! `cargo bench --bench render [-- SPEC [RUNS]]`
+
+use moirecast_kernel::mesher::mesh_device;
+use moirecast_kernel::progress::Silent;
+use moirecast_render::frame::{render, View};
+use moirecast_render::Scene;
+use std::time::Instant;
+
+mod common;
+use common::median;
+
+fn main() {
+    let (spec_path, runs) = common::spec_and_runs(5);
+    let spec = moirecast_spec::load(std::path::Path::new(&spec_path)).unwrap();
+    let design = &spec.design;
+    let dm = mesh_device(design, &Silent).unwrap();
+    common::print_header(&spec_path, runs);
+    println!("triangles         {}", dm.mesh.triangles.len());
+    let scene_t: Vec<f64> = (0..runs)
+        .map(|_| {
+            let t = Instant::now();
+            let scene = Scene::new(&dm.mesh);
+            std::hint::black_box(&scene);
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    println!("scene (BVH)       {:8.1} ms", median(scene_t) * 1e3);
+    for size in [256, 512] {
+        let mut fid = 0.0;
+        let times: Vec<f64> = (0..runs)
+            .map(|_| {
+                let t = Instant::now();
+                let f = render(
+                    design,
+                    &dm.mesh,
+                    View {
+                        width: size,
+                        height: size,
+                        samples: 1,
+                        tilt_across: 0.0,
+                        tilt_along: 0.0,
+                        seed: 1,
+                    },
+                );
+                let e = t.elapsed().as_secs_f64();
+                fid = moirecast_render::fidelity(
+                    &f.luminance,
+                    &f.phase,
+                    f.width,
+                    f.height,
+                    f.period_px,
+                );
+                e
+            })
+            .collect();
+        println!(
+            "frame {size} x {size}  {:8.1} ms  (scene included; 1 sample per pixel; fidelity {fid:.3})",
+            median(times) * 1e3
+        );
+    }
+}
