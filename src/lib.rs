@@ -2,6 +2,7 @@
 //! mesh → checks → files. The binary (`main.rs`) only parses arguments and
 //! draws progress.
 
+pub mod explore;
 pub mod mold_report;
 pub mod render;
 pub mod report;

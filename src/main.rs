@@ -55,6 +55,31 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
+    /// Score the (a, d) design space (METHOD §3) by moiré fidelity, as in
+    /// the paper's Fig. 7: a from 0 to 1, d from 0.6 to 1.4 D_s. Writes
+    /// DIR/grid.png (cells labelled "a d/D_s"), DIR/report.json and
+    /// DIR/best.toml (the spec of the best cell).
+    Explore {
+        #[command(flatten)]
+        run: RunArgs,
+        /// Cell width and height in pixels.
+        #[arg(long, default_value_t = 96)]
+        size: usize,
+        /// Samples per pixel along each axis.
+        #[arg(long, default_value_t = 1)]
+        samples: usize,
+        /// Tilts tried per cell (the best counts), degrees, comma-separated.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            allow_hyphen_values = true,
+            default_value = "-5,0,5"
+        )]
+        tilts: Vec<f64>,
+        /// Seed of the sample jitter.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
     /// Build the device and its two-piece casting mold: DIR/device.stl,
     /// DIR/mold-top.stl, DIR/mold-bottom.stl, DIR/assembly.scad and DIR/report.json.
     Mold {
@@ -71,6 +96,19 @@ enum Command {
 enum MesherArg {
     Direct,
     Brep,
+}
+
+/// Refuses view options out of range before anything is built.
+fn check_view(size: usize, samples: usize, tilts: &[f64]) -> Result<()> {
+    if size == 0 || size > 4096 || samples == 0 || samples > 16 || tilts.is_empty() {
+        anyhow::bail!(
+            "--size must be 1..=4096 (got {size}), --samples 1..=16 (got {samples}), and --tilts must name at least one angle"
+        );
+    }
+    if let Some(t) = tilts.iter().find(|t| !t.is_finite() || t.abs() >= 60.0) {
+        anyhow::bail!("--tilts: {t} is not a tilt in (-60, 60) degrees");
+    }
+    Ok(())
 }
 
 /// What every command takes.
@@ -251,14 +289,7 @@ fn run(cli: Cli) -> Result<()> {
             tilts,
             seed,
         } => {
-            if size == 0 || size > 4096 || samples == 0 || samples > 16 || tilts.is_empty() {
-                anyhow::bail!(
-                    "--size must be 1..=4096 (got {size}), --samples 1..=16 (got {samples}), and --tilts must name at least one angle"
-                );
-            }
-            if let Some(t) = tilts.iter().find(|t| !t.is_finite() || t.abs() >= 60.0) {
-                anyhow::bail!("--tilts: {t} is not a tilt in (-60, 60) degrees");
-            }
+            check_view(size, samples, &tilts)?;
             let (bars, started, spec) = start(&run)?;
             let options = moirecast::render::RenderOptions {
                 size,
@@ -273,6 +304,30 @@ fn run(cli: Cli) -> Result<()> {
                 for (tilt, f) in &done.fidelity {
                     eprintln!("tilt {tilt:+6.1}°: fidelity {f:.3}");
                 }
+                print_written(&done.written, done.bytes, started);
+            }
+        }
+        Command::Explore {
+            run,
+            size,
+            samples,
+            tilts,
+            seed,
+        } => {
+            check_view(size, samples, &tilts)?;
+            let (bars, started, spec) = start(&run)?;
+            let options = moirecast::explore::ExploreOptions {
+                size,
+                samples,
+                tilts_deg: tilts,
+                seed,
+            };
+            let result = moirecast::explore::run_explore(&spec, &run.out, &options, &bars);
+            bars.done();
+            let done = result?;
+            if !run.quiet {
+                let (a, d, f) = done.best;
+                eprintln!("best cell: a = {a}, d = {d:.4} mm, fidelity {f:.3}");
                 print_written(&done.written, done.bytes, started);
             }
         }

@@ -57,7 +57,7 @@ pub struct RenderOutcome {
     pub fidelity: Vec<(f64, f64)>,
 }
 
-fn png(gray: &Gray) -> Result<Vec<u8>> {
+pub(crate) fn png(gray: &Gray) -> Result<Vec<u8>> {
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new(&mut bytes).write_image(
         &gray.pixels,

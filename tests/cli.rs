@@ -220,6 +220,47 @@ fn render_writes_frames_sheet_gif_and_fidelity_deterministically() {
     assert!(!ok && err.contains("--tilts") && !out.exists(), "{err}");
 }
 
+/// `moirecast explore`: 5 × 5 cells of (a, d), each scored, the best one
+/// named in the report and written as a spec that builds.
+#[test]
+fn explore_scores_the_design_space_and_writes_the_best_spec() {
+    let dir = scratch("explore");
+    let (ok, err, out) = run_with(&["explore", "--size", "24", "--tilts=0"], SMALL, &dir);
+    assert!(ok, "{err}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let cells = report["cells"].as_array().unwrap();
+    assert_eq!(cells.len(), 25);
+    let best = report["best"].as_u64().unwrap() as usize;
+    let best_fid = cells[best]["fidelity"].as_f64().unwrap();
+    for c in cells {
+        if let Some(f) = c["fidelity"].as_f64() {
+            assert!((0.0..=best_fid).contains(&f), "{c}");
+        } else {
+            assert!(c["invalid"].is_string(), "{c}");
+        }
+    }
+    let best_spec = std::fs::read_to_string(out.join("best.toml")).unwrap();
+    assert!(
+        best_spec.contains(&format!("a = {}", cells[best]["a"])),
+        "{best_spec}"
+    );
+    let o = Command::new(BIN)
+        .args([
+            "device",
+            out.join("best.toml").to_str().unwrap(),
+            "-q",
+            "-o",
+        ])
+        .arg(dir.join("best-device"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read(out.join("grid.png"))
+        .unwrap()
+        .starts_with(b"\x89PNG"));
+}
+
 /// (what is wrong, the spec edit, the key the error must name, a phrase of the fix or problem)
 const BAD: &[(&str, &str, &str, &str)] = &[
     (

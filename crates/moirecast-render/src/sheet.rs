@@ -64,8 +64,12 @@ pub fn contact_sheet(frames: &[(Gray, String)], columns: usize) -> Gray {
             pixels[(y0 + y) * width + x0..(y0 + y) * width + x0 + fw]
                 .copy_from_slice(&frame.pixels[y * fw..(y + 1) * fw]);
         }
-        // the label, scale 2, centred under the frame
-        let scale = 2;
+        // the label centred under the frame, at scale 2 where it fits
+        let scale = if label.chars().count() * 12 <= fw {
+            2
+        } else {
+            1
+        };
         let text_w = label.chars().count() * 6 * scale;
         let tx = x0 + fw.saturating_sub(text_w) / 2;
         let ty = y0 + fh + (LABEL_HEIGHT - 7 * scale) / 2;

@@ -1,0 +1,207 @@
+//! `moirecast explore`: the (a, d) design space of METHOD §3 as a grid, as
+//! in the paper's Fig. 7, scored by moiré fidelity: `grid.png` (each cell's
+//! best frame, labelled "a d/D_s"), `report.json` (fidelity per cell) and
+//! `best.toml`, the spec of the best cell.
+
+use crate::commit_with_report;
+use crate::render::png;
+use anyhow::{Context, Result};
+use moirecast_export::OutputSet;
+use moirecast_kernel::mesher::mesh_device;
+use moirecast_kernel::progress::{Progress, Silent};
+use moirecast_kernel::Design;
+use moirecast_render::frame::{render, View};
+use moirecast_render::sheet::{contact_sheet, to_gray, Gray};
+use moirecast_spec::Spec;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// The weights a between the offset (0) and the focal (1) surface.
+pub const A_VALUES: [f64; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
+/// Offsets d as multiples of the standard lens's focal depth D_s.
+pub const D_RATIOS: [f64; 5] = [0.6, 0.8, 1.0, 1.2, 1.4];
+
+#[derive(Clone, Debug)]
+pub struct ExploreOptions {
+    pub size: usize,
+    pub samples: usize,
+    pub tilts_deg: Vec<f64>,
+    pub seed: u64,
+}
+
+#[derive(Serialize)]
+struct Cell {
+    a: f64,
+    d_over_ds: f64,
+    d_mm: f64,
+    /// Best fidelity over the tilts, and the tilt; `None` if the design is invalid.
+    fidelity: Option<f64>,
+    best_tilt_deg: Option<f64>,
+    /// Why the design is invalid (METHOD's validity rules), if it is.
+    invalid: Option<String>,
+}
+
+#[derive(Serialize)]
+struct ExploreReport {
+    moirecast: &'static str,
+    spec: String,
+    size_px: usize,
+    samples_per_pixel: usize,
+    tilts_deg: Vec<f64>,
+    seed: u64,
+    /// Row-major: rows are d/D_s, columns are a.
+    cells: Vec<Cell>,
+    best: usize,
+}
+
+pub struct ExploreOutcome {
+    pub written: Vec<PathBuf>,
+    pub bytes: usize,
+    pub best: (f64, f64, f64),
+}
+
+/// `text` with `[base] a` and `d` set; a relative profile image is made
+/// absolute against `spec_dir`, so the spec loads from anywhere.
+fn spec_with_base(text: &str, a: f64, d: f64, spec_dir: Option<&Path>) -> Result<String> {
+    let mut table: toml::Table = toml::from_str(text).context("re-reading the spec")?;
+    let base = table
+        .entry("base")
+        .or_insert_with(|| toml::Value::Table(Default::default()))
+        .as_table_mut()
+        .context("[base] is a table")?;
+    base.insert("a".into(), toml::Value::Float(a));
+    base.insert("d".into(), toml::Value::Float(d));
+    if let (Some(dir), Some(profile)) = (
+        spec_dir,
+        table.get_mut("profile").and_then(|p| p.as_table_mut()),
+    ) {
+        if let Some(toml::Value::String(image)) = profile.get_mut("image") {
+            if Path::new(image.as_str()).is_relative() {
+                *image = dir.join(&*image).display().to_string();
+            }
+        }
+    }
+    Ok(format!(
+        "# The best cell of `moirecast explore`: a = {a}, d = {d} mm.\n{}",
+        toml::to_string(&table)?
+    ))
+}
+
+pub fn run_explore(
+    spec: &Spec,
+    out: &Path,
+    options: &ExploreOptions,
+    progress: &dyn Progress,
+) -> Result<ExploreOutcome> {
+    let base = &spec.design;
+    let ds = base.standard.focal_depth;
+    progress.stage("exploring (a, d)", (A_VALUES.len() * D_RATIOS.len()) as u64);
+    let mut cells = Vec::new();
+    let mut frames: Vec<(Gray, String)> = Vec::new();
+    let blank = Gray {
+        width: options.size,
+        height: options.size,
+        pixels: vec![128; options.size * options.size],
+    };
+    for &ratio in &D_RATIOS {
+        for &a in &A_VALUES {
+            let mut params = base.params.clone();
+            params.base.a = a;
+            params.base.d = Some(ratio * ds);
+            let label = format!("{a:.2} {ratio:.1}");
+            let cell = match Design::new(params) {
+                Err(e) => {
+                    frames.push((blank.clone(), label));
+                    Cell {
+                        a,
+                        d_over_ds: ratio,
+                        d_mm: ratio * ds,
+                        fidelity: None,
+                        best_tilt_deg: None,
+                        invalid: Some(e.to_string()),
+                    }
+                }
+                Ok(design) => {
+                    let dm = mesh_device(&design, &Silent).context("meshing a cell")?;
+                    let mut best: Option<(f64, f64, Gray)> = None;
+                    for &tilt in &options.tilts_deg {
+                        let f = render(
+                            base,
+                            &dm.mesh,
+                            View {
+                                width: options.size,
+                                height: options.size,
+                                samples: options.samples,
+                                tilt_across: tilt.to_radians(),
+                                tilt_along: 0.0,
+                                seed: options.seed,
+                            },
+                        );
+                        let fid = moirecast_render::fidelity(
+                            &f.luminance,
+                            &f.phase,
+                            f.width,
+                            f.height,
+                            f.period_px,
+                        );
+                        if best.as_ref().is_none_or(|b| fid > b.0) {
+                            best = Some((fid, tilt, to_gray(f.width, f.height, &f.luminance)));
+                        }
+                    }
+                    let (fid, tilt, gray) = best.context("at least one tilt")?;
+                    frames.push((gray, label));
+                    Cell {
+                        a,
+                        d_over_ds: ratio,
+                        d_mm: ratio * ds,
+                        fidelity: Some(fid),
+                        best_tilt_deg: Some(tilt),
+                        invalid: None,
+                    }
+                }
+            };
+            cells.push(cell);
+            progress.tick(1);
+        }
+    }
+    let best = (0..cells.len())
+        .filter(|&i| cells[i].fidelity.is_some())
+        .fold(None, |b: Option<usize>, i| match b {
+            Some(j) if cells[j].fidelity >= cells[i].fidelity => Some(j),
+            _ => Some(i),
+        })
+        .context("no cell of the (a, d) grid is a valid design")?;
+    let spec_text = match Path::new(&spec.origin) {
+        p if p.is_file() => std::fs::read_to_string(p)?,
+        _ => moirecast_spec::DEFAULT_SPEC.to_owned(),
+    };
+    let spec_dir = Path::new(&spec.origin)
+        .is_file()
+        .then(|| Path::new(&spec.origin).parent().map(|p| p.canonicalize()))
+        .flatten()
+        .transpose()?;
+    let b = &cells[best];
+    let mut files = OutputSet::new();
+    files.add("grid.png", png(&contact_sheet(&frames, A_VALUES.len()))?);
+    files.add(
+        "best.toml",
+        spec_with_base(&spec_text, b.a, b.d_mm, spec_dir.as_deref())?.into_bytes(),
+    );
+    let outcome_best = (b.a, b.d_mm, b.fidelity.unwrap_or(0.0));
+    let report = ExploreReport {
+        moirecast: env!("CARGO_PKG_VERSION"),
+        spec: crate::report::spec_name(spec),
+        size_px: options.size,
+        samples_per_pixel: options.samples * options.samples,
+        tilts_deg: options.tilts_deg.clone(),
+        seed: options.seed,
+        cells,
+        best,
+    };
+    let (written, bytes) = commit_with_report(files, &report, out)?;
+    Ok(ExploreOutcome {
+        written,
+        bytes,
+        best: outcome_best,
+    })
+}
