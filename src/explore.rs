@@ -10,7 +10,7 @@ use moirecast_export::OutputSet;
 use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::{Progress, Silent};
 use moirecast_kernel::Design;
-use moirecast_render::frame::{render, View};
+use moirecast_render::frame::render_scored;
 use moirecast_render::sheet::{contact_sheet, to_gray, Gray};
 use moirecast_spec::Spec;
 use serde::Serialize;
@@ -21,13 +21,8 @@ pub const A_VALUES: [f64; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
 /// Offsets d as multiples of the standard lens's focal depth D_s.
 pub const D_RATIOS: [f64; 5] = [0.6, 0.8, 1.0, 1.2, 1.4];
 
-#[derive(Clone, Debug)]
-pub struct ExploreOptions {
-    pub size: usize,
-    pub samples: usize,
-    pub tilts_deg: Vec<f64>,
-    pub seed: u64,
-}
+/// Cell size, samples, the tilts tried per cell (the best counts), seed.
+pub type ExploreOptions = crate::render::RenderOptions;
 
 #[derive(Serialize)]
 struct Cell {
@@ -125,25 +120,7 @@ pub fn run_explore(
                     let dm = mesh_device(&design, &Silent).context("meshing a cell")?;
                     let mut best: Option<(f64, f64, Gray)> = None;
                     for &tilt in &options.tilts_deg {
-                        let f = render(
-                            base,
-                            &dm.mesh,
-                            View {
-                                width: options.size,
-                                height: options.size,
-                                samples: options.samples,
-                                tilt_across: tilt.to_radians(),
-                                tilt_along: 0.0,
-                                seed: options.seed,
-                            },
-                        );
-                        let fid = moirecast_render::fidelity(
-                            &f.luminance,
-                            &f.phase,
-                            f.width,
-                            f.height,
-                            f.period_px,
-                        );
+                        let (f, fid) = render_scored(base, &dm.mesh, options.view(tilt));
                         if best.as_ref().is_none_or(|b| fid > b.0) {
                             best = Some((fid, tilt, to_gray(f.width, f.height, &f.luminance)));
                         }

@@ -98,8 +98,13 @@ enum MesherArg {
     Brep,
 }
 
-/// Refuses view options out of range before anything is built.
-fn check_view(size: usize, samples: usize, tilts: &[f64]) -> Result<()> {
+/// The view options, refused when out of range before anything is built.
+fn view_options(
+    size: usize,
+    samples: usize,
+    tilts: Vec<f64>,
+    seed: u64,
+) -> Result<moirecast::render::RenderOptions> {
     if size == 0 || size > 4096 || samples == 0 || samples > 16 || tilts.is_empty() {
         anyhow::bail!(
             "--size must be 1..=4096 (got {size}), --samples 1..=16 (got {samples}), and --tilts must name at least one angle"
@@ -108,7 +113,12 @@ fn check_view(size: usize, samples: usize, tilts: &[f64]) -> Result<()> {
     if let Some(t) = tilts.iter().find(|t| !t.is_finite() || t.abs() >= 60.0) {
         anyhow::bail!("--tilts: {t} is not a tilt in (-60, 60) degrees");
     }
-    Ok(())
+    Ok(moirecast::render::RenderOptions {
+        size,
+        samples,
+        tilts_deg: tilts,
+        seed,
+    })
 }
 
 /// What every command takes.
@@ -289,14 +299,8 @@ fn run(cli: Cli) -> Result<()> {
             tilts,
             seed,
         } => {
-            check_view(size, samples, &tilts)?;
+            let options = view_options(size, samples, tilts, seed)?;
             let (bars, started, spec) = start(&run)?;
-            let options = moirecast::render::RenderOptions {
-                size,
-                samples,
-                tilts_deg: tilts,
-                seed,
-            };
             let result = moirecast::render::run_render(&spec, &run.out, &options, &bars);
             bars.done();
             let done = result?;
@@ -314,14 +318,8 @@ fn run(cli: Cli) -> Result<()> {
             tilts,
             seed,
         } => {
-            check_view(size, samples, &tilts)?;
+            let options = view_options(size, samples, tilts, seed)?;
             let (bars, started, spec) = start(&run)?;
-            let options = moirecast::explore::ExploreOptions {
-                size,
-                samples,
-                tilts_deg: tilts,
-                seed,
-            };
             let result = moirecast::explore::run_explore(&spec, &run.out, &options, &bars);
             bars.done();
             let done = result?;

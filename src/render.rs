@@ -9,13 +9,13 @@ use moirecast_export::OutputSet;
 use moirecast_kernel::check::SolidMesh;
 use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::Progress;
-use moirecast_render::frame::{render, View};
+use moirecast_render::frame::{render_scored, View};
 use moirecast_render::sheet::{contact_sheet, to_gray, Gray};
 use moirecast_spec::Spec;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
-/// What to render.
+/// What to render (`moirecast render` and `moirecast explore`).
 #[derive(Clone, Debug)]
 pub struct RenderOptions {
     /// Frame width and height (pixels).
@@ -25,6 +25,20 @@ pub struct RenderOptions {
     /// Tilts about the lens axis (degrees), one frame each.
     pub tilts_deg: Vec<f64>,
     pub seed: u64,
+}
+
+impl RenderOptions {
+    /// The view at `tilt_deg` about the lens axis.
+    pub fn view(&self, tilt_deg: f64) -> View {
+        View {
+            width: self.size,
+            height: self.size,
+            samples: self.samples,
+            tilt_across: tilt_deg.to_radians(),
+            tilt_along: 0.0,
+            seed: self.seed,
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -103,26 +117,8 @@ pub fn run_render(
     let (mut grays, mut reports) = (Vec::new(), Vec::new());
     let mut period_px = 0.0;
     for (i, &tilt) in options.tilts_deg.iter().enumerate() {
-        let frame = render(
-            design,
-            &dm.mesh,
-            View {
-                width: options.size,
-                height: options.size,
-                samples: options.samples,
-                tilt_across: tilt.to_radians(),
-                tilt_along: 0.0,
-                seed: options.seed,
-            },
-        );
+        let (frame, fidelity) = render_scored(design, &dm.mesh, options.view(tilt));
         period_px = frame.period_px;
-        let fidelity = moirecast_render::fidelity(
-            &frame.luminance,
-            &frame.phase,
-            frame.width,
-            frame.height,
-            frame.period_px,
-        );
         let gray = to_gray(frame.width, frame.height, &frame.luminance);
         let name = format!("frame-{i:02}.png");
         files.add(&name, png(&gray)?);

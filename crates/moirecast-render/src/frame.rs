@@ -117,3 +117,16 @@ pub fn render(design: &Design, mesh: &Mesh, view: View) -> Frame {
         period_px: design.params.period / pixel,
     }
 }
+
+/// [`render`] and the frame's [`crate::fidelity`].
+pub fn render_scored(design: &Design, mesh: &Mesh, view: View) -> (Frame, f64) {
+    let frame = render(design, mesh, view);
+    let fidelity = crate::fidelity(
+        &frame.luminance,
+        &frame.phase,
+        frame.width,
+        frame.height,
+        frame.period_px,
+    );
+    (frame, fidelity)
+}
