@@ -12,6 +12,7 @@ use moirecast_kernel::progress::{Progress, Silent};
 use moirecast_kernel::Design;
 use moirecast_render::frame::render_scored;
 use moirecast_render::sheet::{contact_sheet, to_gray, Gray};
+use moirecast_render::Scene;
 use moirecast_spec::Spec;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -119,8 +120,9 @@ pub fn run_explore(
                 Ok(design) => {
                     let dm = mesh_device(&design, &Silent).context("meshing a cell")?;
                     let mut best: Option<(f64, f64, Gray)> = None;
+                    let scene = Scene::new(&dm.mesh);
                     for &tilt in &options.tilts_deg {
-                        let (f, fid) = render_scored(base, &dm.mesh, options.view(tilt));
+                        let (f, fid) = render_scored(base, &scene, options.view(tilt));
                         if best.as_ref().is_none_or(|b| fid > b.0) {
                             best = Some((fid, tilt, to_gray(f.width, f.height, &f.luminance)));
                         }

@@ -115,9 +115,6 @@ pub fn build_device_checked(
     })
 }
 
-/// `moirecast device`: builds the device of `spec` and writes
-/// `device.stl`, `device.step` and `report.json` into `out` — all of them,
-/// or nothing.
 /// What `moirecast device` wrote, for the summary it prints.
 pub struct DeviceOutcome {
     pub written: Vec<PathBuf>,
@@ -139,6 +136,9 @@ pub enum Mesher {
     Brep,
 }
 
+/// `moirecast device`: builds the device of `spec` and writes
+/// `device.stl`, `device.step` and `report.json` into `out` — all of them,
+/// or nothing.
 pub fn run_device(
     spec: &Spec,
     out: &Path,

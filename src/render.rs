@@ -11,6 +11,7 @@ use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::Progress;
 use moirecast_render::frame::{render_scored, View};
 use moirecast_render::sheet::{contact_sheet, to_gray, Gray};
+use moirecast_render::Scene;
 use moirecast_spec::Spec;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -113,11 +114,12 @@ pub fn run_render(
     let (checks, _) = SolidMesh::validate(&dm.mesh);
     refuse_failed(&checks)?;
     progress.stage("rendering", options.tilts_deg.len() as u64);
+    let scene = Scene::new(&dm.mesh);
     let mut files = OutputSet::new();
     let (mut grays, mut reports) = (Vec::new(), Vec::new());
     let mut period_px = 0.0;
     for (i, &tilt) in options.tilts_deg.iter().enumerate() {
-        let (frame, fidelity) = render_scored(design, &dm.mesh, options.view(tilt));
+        let (frame, fidelity) = render_scored(design, &scene, options.view(tilt));
         period_px = frame.period_px;
         let gray = to_gray(frame.width, frame.height, &frame.luminance);
         let name = format!("frame-{i:02}.png");

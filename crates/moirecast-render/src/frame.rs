@@ -5,7 +5,7 @@
 use crate::scene::Scene;
 use crate::trace::{radiance, SplitMix64};
 use glam::{DMat3, DVec3};
-use moirecast_kernel::{Design, Mesh, PitchSurface};
+use moirecast_kernel::{Design, PitchSurface};
 use rayon::prelude::*;
 
 /// How to render one frame.
@@ -54,9 +54,10 @@ fn layout_of(design: &Design, x: f64, y: f64) -> (f64, f64) {
     }
 }
 
-pub fn render(design: &Design, mesh: &Mesh, view: View) -> Frame {
-    let scene = Scene::new(mesh);
-    let (lo, hi) = mesh.bounds();
+/// One frame of `scene` (the device's mesh, built once and shared by every
+/// frame of it); `design` gives the index and the elevation phase.
+pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
+    let (lo, hi) = scene.mesh().bounds();
     let rot = DMat3::from_rotation_y(view.tilt_across) * DMat3::from_rotation_x(view.tilt_along);
     let dir = rot * DVec3::NEG_Z;
     let (du, dv) = (rot * DVec3::X, rot * DVec3::Y);
@@ -82,7 +83,7 @@ pub fn render(design: &Design, mesh: &Mesh, view: View) -> Frame {
                     + du * (fx * pixel * view.width as f64)
                     + dv * (fy * pixel * view.height as f64);
                 sum += radiance(
-                    &scene,
+                    scene,
                     design.params.lens.index,
                     target - back * dir,
                     dir,
@@ -119,8 +120,8 @@ pub fn render(design: &Design, mesh: &Mesh, view: View) -> Frame {
 }
 
 /// [`render`] and the frame's [`crate::fidelity`].
-pub fn render_scored(design: &Design, mesh: &Mesh, view: View) -> (Frame, f64) {
-    let frame = render(design, mesh, view);
+pub fn render_scored(design: &Design, scene: &Scene, view: View) -> (Frame, f64) {
+    let frame = render(design, scene, view);
     let fidelity = crate::fidelity(
         &frame.luminance,
         &frame.phase,

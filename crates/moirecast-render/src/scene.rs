@@ -46,6 +46,11 @@ impl<'m> Scene<'m> {
         Scene { mesh, bvh }
     }
 
+    /// The mesh the scene was built over.
+    pub fn mesh(&self) -> &'m Mesh {
+        self.mesh
+    }
+
     /// The nearest hit along `origin + t·dir` with `t > t_min` (dir unit).
     pub fn intersect(&self, origin: DVec3, dir: DVec3, t_min: f64) -> Option<Hit> {
         // the f32 BVH only culls; widen its interval so no f64 hit is lost

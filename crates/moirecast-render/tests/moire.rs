@@ -7,8 +7,8 @@ use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::profile::{Raster, SampledProfile};
 use moirecast_kernel::progress::Silent;
 use moirecast_kernel::{Design, DesignParams, PitchSurface, Profile, ProfileMode};
-use moirecast_render::fidelity;
 use moirecast_render::frame::{render, Frame, View};
+use moirecast_render::{fidelity, Scene};
 
 const SIZE: f64 = 16.0;
 const TILTS: [f64; 5] = [-5.0, -2.5, 0.0, 2.5, 5.0];
@@ -57,7 +57,7 @@ fn frame(phase_of: &Design, device: &Design, tilt: f64, seed: u64) -> Frame {
     let dm = mesh_device(device, &Silent).unwrap();
     render(
         phase_of,
-        &dm.mesh,
+        &Scene::new(&dm.mesh),
         View {
             width: 128,
             height: 128,
