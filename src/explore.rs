@@ -11,6 +11,7 @@ use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::{Progress, Silent};
 use moirecast_kernel::Design;
 use moirecast_render::frame::render_scored;
+use moirecast_render::frame::traced_mesh;
 use moirecast_render::sheet::{contact_sheet, to_gray, Gray};
 use moirecast_render::Scene;
 use moirecast_spec::Spec;
@@ -120,7 +121,9 @@ pub fn run_explore(
                 Ok(design) => {
                     let dm = mesh_device(&design, &Silent).context("meshing a cell")?;
                     let mut best: Option<(f64, f64, Gray)> = None;
-                    let scene = Scene::new(&dm.mesh);
+                    let (mesh, absorbing) =
+                        traced_mesh(&design, &dm).context("building a cell's traced bodies")?;
+                    let scene = Scene::with_absorbing(&mesh, absorbing);
                     for &tilt in &options.tilts_deg {
                         let (f, fid) = render_scored(base, &scene, options.view(tilt));
                         if best.as_ref().is_none_or(|b| fid > b.0) {

@@ -4,6 +4,7 @@
 
 pub mod explore;
 pub mod mold_report;
+pub mod printed;
 pub mod render;
 pub mod report;
 
@@ -149,6 +150,12 @@ pub fn run_device(
     let build = build_device_checked(&spec.design, thoroughness, progress)?;
     let (checks, solid) = build.validated();
     refuse_failed(&checks)?;
+    if let moirecast_kernel::BaseKind::Printed(_) = spec.design.params.base.kind {
+        if mesher == Mesher::Brep {
+            bail!("--mesher brep needs the device's B-rep, which is built for dual-lens devices only; leave it out for a printed device");
+        }
+        return printed::write_printed_device(spec, &build, checks, out, progress);
+    }
     progress.stage("B-rep and STEP", 1);
     let step = moirecast_brep::device_step(&spec.design, &build.mesh, "device.step")
         .context("building the B-rep")?;
@@ -188,9 +195,16 @@ pub fn run_device(
         spec,
         &build,
         &checks,
-        (stl_mesh, stl.len()),
-        &step,
-        cross.as_ref().map(|(_, c)| c),
+        report::DeviceOutputs {
+            files: [(
+                "device.stl".to_string(),
+                report::FileReport::of(stl_mesh, stl.len()),
+            )]
+            .into(),
+            step: Some(&step),
+            printed: None,
+            crosscheck: cross.as_ref().map(|(_, c)| c),
+        },
     );
     let mut files = OutputSet::new();
     files.add("device.stl", stl);
@@ -277,6 +291,13 @@ pub fn run_mold(
     force: bool,
     progress: &dyn Progress,
 ) -> Result<MoldOutcome> {
+    if let moirecast_kernel::BaseKind::Printed(_) = spec.design.params.base.kind {
+        // refused before any meshing: the mold crate would refuse it too
+        bail!(moirecast_spec::describe_mold_error(
+            &spec.origin,
+            &moirecast_mold::MoldError::NotCastable
+        ));
+    }
     let build = build_device(&spec.design, progress)?;
     let mold = moirecast_mold::build_mold(&spec.design, &build.mesh, &spec.mold, progress)
         .map_err(|e| anyhow::anyhow!(moirecast_spec::describe_mold_error(&spec.origin, &e)))?;

@@ -9,7 +9,7 @@ use moirecast_export::OutputSet;
 use moirecast_kernel::check::SolidMesh;
 use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::Progress;
-use moirecast_render::frame::{render_scored, View};
+use moirecast_render::frame::{render_scored, traced_mesh, View};
 use moirecast_render::sheet::{contact_sheet, to_gray, Gray};
 use moirecast_render::Scene;
 use moirecast_spec::Spec;
@@ -114,7 +114,8 @@ pub fn run_render(
     let (checks, _) = SolidMesh::validate(&dm.mesh);
     refuse_failed(&checks)?;
     progress.stage("rendering", options.tilts_deg.len() as u64);
-    let scene = Scene::new(&dm.mesh);
+    let (mesh, absorbing) = traced_mesh(design, &dm).context("building the traced bodies")?;
+    let scene = Scene::with_absorbing(&mesh, absorbing);
     let mut files = OutputSet::new();
     let (mut grays, mut reports) = (Vec::new(), Vec::new());
     let mut period_px = 0.0;
@@ -156,7 +157,10 @@ pub fn run_render(
         samples_per_pixel: options.samples * options.samples,
         seed: options.seed,
         pixels_per_period: period_px,
-        light: "orthographic view; lateral area light below the device, lit towards +x (soft edge ±0.15 in direction x)",
+        light: match design.params.base.kind {
+            moirecast_kernel::BaseKind::DualLens => "orthographic view; lateral area light below the device, lit towards +x (soft edge ±0.15 in direction x)",
+            moirecast_kernel::BaseKind::Printed(_) => "orthographic view; diffuse backlight below the device; black bands absorb",
+        },
         best_frame: best,
         best_fidelity: reports.get(best).map_or(0.0, |r| r.fidelity),
         frames: reports,

@@ -5,7 +5,7 @@
 use crate::DeviceBuild;
 use moirecast_kernel::check::CheckResult;
 use moirecast_kernel::measure::{self, Range};
-use moirecast_kernel::{Mesh, PitchSurface};
+use moirecast_kernel::{BaseKind, Mesh, PitchSurface};
 use moirecast_spec::Spec;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -63,7 +63,16 @@ pub struct DesignEcho {
     pub base_a: f64,
     pub base_d_mm: f64,
     pub base_levels: f64,
-    pub base_afov_deg: f64,
+    /// Base lenses only (dual-lens).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub base_afov_deg: Option<f64>,
+    /// The band layer (printed bases only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub base_duty: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub base_band_thickness_mm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub base_backing_mm: Option<f64>,
     pub profile: String,
     pub tolerance_mm: f64,
 }
@@ -143,7 +152,12 @@ pub struct DeviceReport {
     pub lenses: LensReport,
     pub base_shift_mm: MinMax,
     pub base_shift_periods: MinMax,
-    pub brep: BrepReport,
+    /// The device as a B-rep (dual-lens devices).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub brep: Option<BrepReport>,
+    /// The two bodies of a printed device.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub printed: Option<crate::printed::PrintedReport>,
     /// With `--mesher brep`: truck-meshalgo's tessellation (then
     /// `device.stl`) against the direct mesh.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -180,6 +194,10 @@ pub fn spec_name(spec: &Spec) -> String {
 pub fn design_echo(spec: &Spec) -> DesignEcho {
     let d = &spec.design;
     let p = &d.params;
+    let printed = match p.base.kind {
+        BaseKind::Printed(b) => Some(b),
+        BaseKind::DualLens => None,
+    };
     let (radius, formula) = match &p.surface {
         PitchSurface::Plane => (None, None),
         PitchSurface::Saddle { radius }
@@ -202,23 +220,36 @@ pub fn design_echo(spec: &Spec) -> DesignEcho {
             moirecast_kernel::LensRule::ConstantAfov => "constant-afov",
             moirecast_kernel::LensRule::EqualRadius => "equal-radius",
         },
-        base_kind: "dual-lens",
+        base_kind: match p.base.kind {
+            BaseKind::DualLens => "dual-lens",
+            BaseKind::Printed(_) => "printed",
+        },
         base_a: p.base.a,
         base_d_mm: d.d,
         base_levels: p.base.levels,
-        base_afov_deg: p.base.afov.unwrap_or(p.lens.afov).to_degrees(),
+        base_afov_deg: matches!(p.base.kind, BaseKind::DualLens)
+            .then(|| p.base.afov.unwrap_or(p.lens.afov).to_degrees()),
+        base_duty: printed.map(|b| b.duty),
+        base_band_thickness_mm: printed.map(|b| b.band_thickness),
+        base_backing_mm: printed.map(|b| b.backing),
         profile: spec.profile_source.clone(),
         tolerance_mm: d.tolerance.mm(),
     }
+}
+
+/// What a device run wrote and measured beyond the device mesh itself.
+pub struct DeviceOutputs<'a> {
+    pub files: BTreeMap<String, FileReport>,
+    pub step: Option<&'a moirecast_brep::DeviceStep>,
+    pub printed: Option<crate::printed::PrintedReport>,
+    pub crosscheck: Option<&'a moirecast_brep::CrossCheck>,
 }
 
 pub fn device_report(
     spec: &Spec,
     build: &DeviceBuild,
     checks: &[CheckResult],
-    (stl_mesh, stl_bytes): (&Mesh, usize),
-    step: &moirecast_brep::DeviceStep,
-    crosscheck: Option<&moirecast_brep::CrossCheck>,
+    outputs: DeviceOutputs,
 ) -> DeviceReport {
     let d = &spec.design;
     let s = &d.standard;
@@ -226,11 +257,6 @@ pub fn device_report(
     let ls = &build.lens_stats;
     let shift = measure::shift_range(d);
     let t = d.params.period;
-    let mut files = BTreeMap::new();
-    files.insert(
-        "device.stl".to_string(),
-        FileReport::of(stl_mesh, stl_bytes),
-    );
     DeviceReport {
         moirecast: env!("CARGO_PKG_VERSION"),
         spec: crate::report::spec_name(spec),
@@ -245,7 +271,7 @@ pub fn device_report(
             max_surface_slope_deg: d.max_slope.to_degrees(),
             max_surface_curvature_per_mm: d.max_curvature,
         },
-        files,
+        files: outputs.files,
         mesh: MeshReport {
             triangles: st.triangles,
             vertices: st.vertices,
@@ -272,8 +298,9 @@ pub fn device_report(
             min: shift.min / t,
             max: shift.max / t,
         },
-        brep: BrepReport::of(step),
-        crosscheck: crosscheck.cloned(),
+        brep: outputs.step.map(BrepReport::of),
+        printed: outputs.printed,
+        crosscheck: outputs.crosscheck.cloned(),
         checks: checks.iter().map(CheckReport::from).collect(),
     }
 }

@@ -124,6 +124,90 @@ fn a_small_design_builds_with_a_full_report() {
     assert!(step.starts_with("ISO-10303-21;") && step.ends_with("END-ISO-10303-21;\n"));
 }
 
+/// SMALL with a printed base (METHOD §5.2).
+fn small_printed() -> String {
+    SMALL.replace(
+        "kind = \"dual-lens\"",
+        "kind = \"printed\"\nduty = 0.4\nband_thickness = 0.25\nbacking = 0.8",
+    )
+}
+
+#[test]
+fn a_printed_design_writes_two_bodies_and_a_3mf() {
+    let dir = scratch("printed");
+    let (ok, err, out) = run(&small_printed(), &dir);
+    assert!(ok, "{err}");
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "device-black.stl",
+            "device-clear.stl",
+            "device.3mf",
+            "report.json"
+        ]
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["design"]["base_kind"], "printed");
+    assert_eq!(report["design"]["base_duty"], 0.4);
+    let p = &report["printed"];
+    // 8 periods in 4 mm: a band starts at each
+    assert_eq!(p["bands"], 8, "{p}");
+    let (clear, black, whole) = (
+        p["clear_volume_mm3"].as_f64().unwrap(),
+        p["black_volume_mm3"].as_f64().unwrap(),
+        p["device_volume_mm3"].as_f64().unwrap(),
+    );
+    assert!(((clear + black) - whole).abs() < 1e-9 * whole);
+    // a steep bump on 8 periods: x-space duty departs from φ-space duty a little
+    for how in ["by_volume", "along_lines"] {
+        assert!((p["duty"][how].as_f64().unwrap() - 0.4).abs() < 0.01, "{p}");
+    }
+    for c in report["checks"].as_array().unwrap() {
+        assert_eq!(c["passed"], true, "{c}");
+    }
+    for name in ["base-creases-follow-shift", "bodies-fill-device"] {
+        assert!(report["checks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|c| c["name"] == name));
+    }
+    for f in ["device-clear.stl", "device-black.stl"] {
+        let n = report["files"][f]["triangles"].as_u64().unwrap() as usize;
+        assert_eq!(std::fs::read(out.join(f)).unwrap().len(), 84 + 50 * n);
+    }
+    let threemf = std::fs::read(out.join("device.3mf")).unwrap();
+    assert!(threemf.starts_with(b"PK\x03\x04"), "a zip package");
+    // byte-identical on a second run
+    let again = scratch("printed-again");
+    let (ok, err, out2) = run(&small_printed(), &again);
+    assert!(ok, "{err}");
+    for f in names {
+        assert!(
+            std::fs::read(out.join(&f)).unwrap() == std::fs::read(out2.join(&f)).unwrap(),
+            "{f} differs between runs"
+        );
+    }
+}
+
+#[test]
+fn a_printed_design_is_not_moulded() {
+    let dir = scratch("printed-mold");
+    let (ok, err, out) = run_command("mold", &small_printed(), &dir);
+    assert!(!ok);
+    assert!(
+        err.contains("base.kind") && err.contains("printed, not cast"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
 #[test]
 fn outputs_are_byte_identical_across_runs() {
     let (a, b) = (scratch("det-a"), scratch("det-b"));
@@ -340,6 +424,24 @@ const BAD: &[(&str, &str, &str, &str)] = &[
         "index = 1.41|material = \"unobtainium\"",
         "lens.material",
         "sylgard-184",
+    ),
+    (
+        "printed keys on a dual-lens base",
+        "levels = 1.0|levels = 1.0\nduty = 0.4",
+        "base.duty",
+        "printed",
+    ),
+    (
+        "duty out of range",
+        "kind = \"dual-lens\"|kind = \"printed\"\nduty = 0.99",
+        "base.duty",
+        "0.95",
+    ),
+    (
+        "band layer too thin",
+        "kind = \"dual-lens\"|kind = \"printed\"\nband_thickness = 0.001",
+        "base.band_thickness",
+        "0.01",
     ),
     (
         "base AFOV out of range",

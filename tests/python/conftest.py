@@ -4,12 +4,24 @@ import json
 import os
 import pathlib
 import subprocess
+import tomllib
 
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 BIN = pathlib.Path(os.environ.get("MOIRECAST_BIN", ROOT / "target" / "release" / "moirecast"))
-SPECS = sorted((ROOT / "molds").glob("*.toml"))
+ALL_SPECS = sorted((ROOT / "molds").glob("*.toml"))
+
+
+def is_printed(spec):
+    """A printed (multi-material) design: two bodies, no B-rep, no mold."""
+    return tomllib.loads(spec.read_text()).get("base", {}).get("kind") == "printed"
+
+
+# Cast (dual-lens) devices: device.stl, device.step and a mold each.
+SPECS = [s for s in ALL_SPECS if not is_printed(s)]
+# Printed devices: device-clear.stl, device-black.stl and device.3mf.
+PRINTED_SPECS = [s for s in ALL_SPECS if is_printed(s)]
 
 
 def oracle(name):

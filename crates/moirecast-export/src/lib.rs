@@ -1,9 +1,13 @@
-//! Output files: binary STL and an all-or-nothing output directory.
+//! Output files: binary STL, 3MF and an all-or-nothing output directory.
 //!
 //! Nothing is written until every file of a run has been encoded and every
 //! check has passed; then each file goes to a temporary name in the target
 //! directory and is renamed into place, so a failed run leaves no partial
 //! file behind and readers never see half a file.
+
+mod threemf;
+
+pub use threemf::{model_xml, threemf_bytes, Material, Object};
 
 use moirecast_kernel::check::SolidMesh;
 use std::path::{Path, PathBuf};

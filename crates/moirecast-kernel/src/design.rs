@@ -28,8 +28,41 @@ pub struct LensParams {
     pub rule: LensRule,
 }
 
+/// What the base layer is (METHOD §5).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BaseKind {
+    /// A second lens array over s, one clear material (§5.1): the cast device.
+    DualLens,
+    /// Black bands on s inside a clear body, for multi-material printers (§5.2).
+    Printed(PrintedBase),
+}
+
+/// The band layer of a printed device (METHOD §5.2). Layers are measured
+/// along −z, the print and draw direction (see `printed.rs` for why).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrintedBase {
+    /// Black share of each period: bands are where frac(φ) < duty.
+    pub duty: f64,
+    /// Thickness t_b of the black band layer below s (mm).
+    pub band_thickness: f64,
+    /// Thickness t_back of the clear backing below the bands (mm).
+    pub backing: f64,
+}
+
+impl Default for PrintedBase {
+    /// METHOD §5.2's defaults: duty 0.5, t_b = 0.2 mm; a 1 mm backing.
+    fn default() -> Self {
+        PrintedBase {
+            duty: 0.5,
+            band_thickness: 0.2,
+            backing: 1.0,
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug)]
 pub struct BaseParams {
+    pub kind: BaseKind,
     /// Weight between the offset (0) and focal (1) surface.
     pub a: f64,
     /// Offset distance d (mm); `None` means the standard focal depth D_s.
@@ -69,6 +102,7 @@ impl DesignParams {
                 rule: LensRule::ConstantAfov,
             },
             base: BaseParams {
+                kind: BaseKind::DualLens,
                 a: 0.0,
                 d: None,
                 levels: 1.0,
@@ -123,6 +157,13 @@ pub mod limits {
     /// at most 10 periods wide).
     pub const MAX_SHIFT_SLOPE: f64 = 0.9;
     pub const MAX_LEVELS: f64 = 100.0;
+    /// Duty cycle of printed bands: narrower bands than 5 % of a period
+    /// are below what multi-material printers resolve at usual periods.
+    pub const DUTY: (f64, f64) = (0.05, 0.95);
+    /// Band layer thickness (mm): at least a few print layers.
+    pub const BAND_THICKNESS_MM: (f64, f64) = (0.01, 10.0);
+    /// Clear backing thickness (mm).
+    pub const BACKING_MM: (f64, f64) = (0.01, 50.0);
 }
 
 /// A design that satisfies every rule of METHOD. Geometry lives in `model.rs`.
@@ -283,6 +324,29 @@ impl Design {
             "periods",
             "1 level is the usual choice",
         )?;
+        if let BaseKind::Printed(pb) = p.base.kind {
+            in_range(
+                Param::Duty,
+                pb.duty,
+                DUTY,
+                "",
+                "0.5 gives equal black and clear bands",
+            )?;
+            in_range(
+                Param::BandThickness,
+                pb.band_thickness,
+                BAND_THICKNESS_MM,
+                "mm",
+                "0.2 mm is the default",
+            )?;
+            in_range(
+                Param::Backing,
+                pb.backing,
+                BACKING_MM,
+                "mm",
+                "1 mm is the default",
+            )?;
+        }
         let standard = StandardLens::new(p.period, p.lens.afov, index);
         let d = match p.base.d {
             None => standard.focal_depth,
@@ -402,7 +466,11 @@ impl Design {
         let t = design.params.period;
         let k_lo = ((-design.margin - 1.5 * a_t) / t).floor() as i64 - 1;
         let k_hi = ((w + design.margin + 0.5 * a_t) / t).ceil() as i64 + 1;
-        design.base_creases = (k_lo, k_hi);
+        // a printed base has two band edges per period: φ = k and φ = k + duty
+        design.base_creases = match design.params.base.kind {
+            BaseKind::DualLens => (k_lo, k_hi),
+            BaseKind::Printed(_) => (2 * k_lo, 2 * k_hi),
+        };
         Ok(design)
     }
 

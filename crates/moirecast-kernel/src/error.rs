@@ -17,6 +17,9 @@ pub enum Param {
     BaseA,
     BaseD,
     Levels,
+    Duty,
+    BandThickness,
+    Backing,
     Blur,
     Tolerance,
     ProfileImage,
@@ -26,7 +29,7 @@ pub enum Param {
 
 impl Param {
     /// Every parameter, for exhaustive mappings and their tests.
-    pub const ALL: [Param; 16] = [
+    pub const ALL: [Param; 19] = [
         Param::SurfaceRadius,
         Param::SurfaceFormula,
         Param::Width,
@@ -38,6 +41,9 @@ impl Param {
         Param::BaseA,
         Param::BaseD,
         Param::Levels,
+        Param::Duty,
+        Param::BandThickness,
+        Param::Backing,
         Param::Blur,
         Param::Tolerance,
         Param::ProfileImage,

@@ -18,6 +18,7 @@ pub mod measure;
 pub mod mesh;
 pub mod mesher;
 pub mod model;
+pub mod printed;
 pub mod profile;
 pub mod progress;
 pub mod solve;
@@ -26,10 +27,13 @@ pub mod strategies;
 pub mod surface;
 pub mod tolerance;
 
-pub use design::{BaseParams, Design, DesignParams, LensParams, LensRule, StandardLens};
+pub use design::{
+    BaseKind, BaseParams, Design, DesignParams, LensParams, LensRule, PrintedBase, StandardLens,
+};
 pub use error::{DesignError, KernelError, Param};
 pub use mesh::Mesh;
 pub use mesher::{DeviceMesh, MeshStats};
+pub use model::BaseSection;
 pub use profile::{Profile, ProfileMode, Raster};
 pub use surface::PitchSurface;
 pub use tolerance::Tolerance;

@@ -310,7 +310,7 @@ pub fn base_creases_follow_shift(design: &Design, dm: &DeviceMesh) -> CheckResul
                 DVec2::new(s.x - p.x, s.y - p.y)
             });
             let err = match q {
-                Ok(q) => (design.base_phase(q.x, q.y) - k as f64)
+                Ok(q) => (design.base_phase(q.x, q.y) - design.crease_phase(k))
                     .abs()
                     .max((design.base_surface(q.x, q.y).z - p.z).abs() / design.params.period),
                 Err(_) => f64::INFINITY,
@@ -334,7 +334,7 @@ pub fn base_creases_follow_shift(design: &Design, dm: &DeviceMesh) -> CheckResul
         1e-8,
         "periods",
         format!(
-            "|φ − k| at every base crease vertex; worst near ({:.3}, {:.3})",
+            "|φ − crease phase| at every base crease or band edge vertex; worst near ({:.3}, {:.3})",
             p.x, p.y
         ),
     )

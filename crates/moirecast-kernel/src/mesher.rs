@@ -21,9 +21,8 @@
 
 use crate::design::Design;
 use crate::error::{KernelError, Result};
-use crate::lens::LensArc;
 use crate::mesh::Mesh;
-use crate::model::LensRef;
+use crate::model::{BaseSection, LensRef};
 use crate::progress::Progress;
 use crate::solve::{bracketed_secant, newton_2d};
 use crate::tolerance::{SOLVE_RESIDUAL_MM, WALL_SNAP_MM};
@@ -146,7 +145,7 @@ impl DeviceMesh {
 
 /// Columns needed across an arc of radius `r` spanning `angle` (rad) for a
 /// chordal error of at most `e`.
-fn columns_for(r: f64, angle: f64, e: f64) -> usize {
+pub(crate) fn columns_for(r: f64, angle: f64, e: f64) -> usize {
     let step = if e >= r {
         std::f64::consts::PI
     } else {
@@ -300,19 +299,15 @@ impl<'a> Planner<'a> {
     /// effective curvature along the lens, K_eff = 8·e / Δv², where Δv is the
     /// largest row spacing with K_vv·Δv² + 2·Δt·K_tv·Δv ≤ 8·e (the pure and
     /// twist terms of a triangle's interpolation error; Δt = 1/columns).
-    fn survey_lens(&self, arcs: &[LensArc], h: f64) -> LensSurvey {
+    fn survey_lens(&self, sections: &[BaseSection], h: f64) -> LensSurvey {
         const TS: usize = 9;
         let e_along = ALONG_SHARE * self.tol();
-        let mut columns = 2;
-        let pts: Vec<[DVec3; TS]> = arcs
+        let mut columns = 1;
+        let pts: Vec<[DVec3; TS]> = sections
             .iter()
-            .map(|arc| {
-                columns = columns.max(columns_for(
-                    arc.radius,
-                    2.0 * arc.half_angle,
-                    ACROSS_SHARE * self.tol(),
-                ));
-                std::array::from_fn(|j| arc.point(j as f64 / (TS - 1) as f64))
+            .map(|section| {
+                columns = columns.max(section.columns(ACROSS_SHARE * self.tol()));
+                std::array::from_fn(|j| section.point(j as f64 / (TS - 1) as f64))
             })
             .collect();
         let dt = 1.0 / columns as f64;
@@ -358,7 +353,10 @@ impl<'a> Planner<'a> {
         let surveys: Vec<LensSurvey> = (0..d.lenses as i64)
             .into_par_iter()
             .map(|i| {
-                let arcs: Vec<LensArc> = stations.iter().map(|&v| d.revealer_arc(i, v)).collect();
+                let arcs: Vec<BaseSection> = stations
+                    .iter()
+                    .map(|&v| BaseSection::Lens(d.revealer_arc(i, v)))
+                    .collect();
                 self.survey_lens(&arcs, h)
             })
             .collect();
@@ -411,7 +409,7 @@ impl<'a> Planner<'a> {
                 let mut near = (None, None);
                 let mut arcs = Vec::with_capacity(stations.len());
                 for &v in &stations {
-                    let (arc, u0, u1) = d.base_arc_and_creases(k, v, near)?;
+                    let (arc, u0, u1) = d.base_section_and_creases(k, v, near)?;
                     near = (Some(u0), Some(u1));
                     arcs.push(arc);
                 }
@@ -1022,9 +1020,9 @@ fn base_row(
         if poly.len() == 1 || t_hi - t_lo > 2.0 * margin {
             let vm = 0.5 * (c0.0 + c1.0);
             let hq = 0.05f64.min(d.params.period);
-            let (am, u0m, u1m) = d.base_arc_and_creases(k, vm, (None, None))?;
-            let (ap, u0p, u1p) = d.base_arc_and_creases(k, vm + hq, (Some(u0m), Some(u1m)))?;
-            let (an, u0n, u1n) = d.base_arc_and_creases(k, vm - hq, (Some(u0m), Some(u1m)))?;
+            let (am, u0m, u1m) = d.base_section_and_creases(k, vm, (None, None))?;
+            let (ap, u0p, u1p) = d.base_section_and_creases(k, vm + hq, (Some(u0m), Some(u1m)))?;
+            let (an, u0n, u1n) = d.base_section_and_creases(k, vm - hq, (Some(u0m), Some(u1m)))?;
             let (du0, du1) = ((u0p - u0n) / (2.0 * hq), (u1p - u1n) / (2.0 * hq));
             let predict = |v: f64| (Some(u0m + du0 * (v - vm)), Some(u1m + du1 * (v - vm)));
             for j in 1..cols {
@@ -1041,7 +1039,7 @@ fn base_row(
                 let mut v = vm + dv;
                 let mut found = None;
                 for _ in 0..12 {
-                    let p = d.base_arc_near(k, v, predict(v))?.point(t);
+                    let p = d.base_section_near(k, v, predict(v))?.point(t);
                     let r = p.y - y;
                     if r.abs() <= row_residual {
                         found = Some(p);

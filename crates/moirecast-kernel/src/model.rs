@@ -2,7 +2,7 @@
 //! surfaces, base creases and base lenses. Every function here is exact up
 //! to floating-point round-off and the convergence of its root finder.
 
-use crate::design::Design;
+use crate::design::{BaseKind, Design};
 use crate::error::Result;
 use crate::lens::LensArc;
 use crate::solve::bracketed_newton;
@@ -96,8 +96,26 @@ impl Design {
         (u + self.params.width / 2.0 - self.shift(u, v)) / self.params.period
     }
 
-    /// Layout u of base crease k at station v: the root of φ(u, v) = k.
-    /// φ increases with u (validated), and E ∈ [0, A·T] brackets the root.
+    /// The phase of base crease k: k for a dual-lens base; for a printed
+    /// base, whose creases are the band edges, ⌊k/2⌋ for even k (a band
+    /// starts) and ⌊k/2⌋ + duty for odd k (it ends).
+    pub fn crease_phase(&self, k: i64) -> f64 {
+        match self.params.base.kind {
+            BaseKind::DualLens => k as f64,
+            BaseKind::Printed(pb) => {
+                k.div_euclid(2) as f64 + if k.rem_euclid(2) == 1 { pb.duty } else { 0.0 }
+            }
+        }
+    }
+
+    /// Whether base section k is a black band (printed bases only).
+    pub fn is_black_band(&self, k: i64) -> bool {
+        matches!(self.params.base.kind, BaseKind::Printed(_)) && k.rem_euclid(2) == 0
+    }
+
+    /// Layout u of base crease k at station v: the root of φ(u, v) =
+    /// [`crease_phase`](Self::crease_phase)(k). φ increases with u
+    /// (validated), and E ∈ [0, A·T] brackets the root.
     pub fn base_crease_u(&self, k: i64, v: f64) -> Result<f64> {
         self.base_crease_u_near(k, v, None)
     }
@@ -109,7 +127,7 @@ impl Design {
             self.params.period,
             self.params.base.levels * self.params.period,
         );
-        let u0 = k as f64 * t - self.params.width / 2.0;
+        let u0 = self.crease_phase(k) * t - self.params.width / 2.0;
         if a_t == 0.0 {
             return Ok(u0);
         }
@@ -134,34 +152,46 @@ impl Design {
         Ok(self.base_surface(self.base_crease_u(k, v)?, v))
     }
 
-    /// Base lens k at station v (METHOD §5.1): from C_k to C_{k+1}, bulging
-    /// along −n_s at the middle of its layout span, away from the body.
+    /// Base lens k of a dual-lens design at station v (METHOD §5.1): from
+    /// C_k to C_{k+1}, bulging along −n_s at the middle of its layout span,
+    /// away from the body.
     pub fn base_arc(&self, k: i64, v: f64) -> Result<LensArc> {
-        self.base_arc_near(k, v, (None, None))
+        let (u0, u1) = (self.base_crease_u(k, v)?, self.base_crease_u(k + 1, v)?);
+        Ok(self.base_arc_between(u0, u1, v))
     }
 
-    /// [`base_arc`](Self::base_arc) with nearby crease solutions to start from.
-    pub fn base_arc_near(
+    /// Base section k at station v, with nearby crease solutions to start from.
+    pub fn base_section_near(
         &self,
         k: i64,
         v: f64,
         near: (Option<f64>, Option<f64>),
-    ) -> Result<LensArc> {
-        Ok(self.base_arc_and_creases(k, v, near)?.0)
+    ) -> Result<BaseSection<'_>> {
+        Ok(self.base_section_and_creases(k, v, near)?.0)
     }
 
-    /// The base arc and the layout u of its two creases.
-    pub fn base_arc_and_creases(
+    /// Base section k (a lens or a band span) at station v and the layout u
+    /// of its two creases.
+    pub fn base_section_and_creases(
         &self,
         k: i64,
         v: f64,
         near: (Option<f64>, Option<f64>),
-    ) -> Result<(LensArc, f64, f64)> {
+    ) -> Result<(BaseSection<'_>, f64, f64)> {
         let (u0, u1) = (
             self.base_crease_u_near(k, v, near.0)?,
             self.base_crease_u_near(k + 1, v, near.1)?,
         );
-        Ok((self.base_arc_between(u0, u1, v), u0, u1))
+        let section = match self.params.base.kind {
+            BaseKind::DualLens => BaseSection::Lens(self.base_arc_between(u0, u1, v)),
+            BaseKind::Printed(_) => BaseSection::Band {
+                design: self,
+                u0,
+                u1,
+                v,
+            },
+        };
+        Ok((section, u0, u1))
     }
 
     /// The base arc whose creases lie at layout u0 and u1 (already solved)
@@ -173,9 +203,9 @@ impl Design {
         LensArc::new(p0, p1, toward, self.base_rule)
     }
 
-    /// A point of base lens k: parameter t ∈ [0, 1] across, station v along.
+    /// A point of base section k: parameter t ∈ [0, 1] across, station v along.
     pub fn base_point(&self, k: i64, t: f64, v: f64) -> Result<DVec3> {
-        Ok(self.base_arc(k, v)?.point(t))
+        Ok(self.base_section_near(k, v, (None, None))?.point(t))
     }
 
     /// A point of revealer lens i.
@@ -198,6 +228,48 @@ impl Design {
                 .map(|p| p.y - y)
                 .unwrap_or(f64::NAN)
         })
+    }
+}
+
+/// One cross-section of the base between creases k and k + 1 at a station:
+/// a base lens (dual-lens) or a span of s itself between two band edges
+/// (printed), where t runs linearly in layout u.
+#[derive(Clone, Copy, Debug)]
+pub enum BaseSection<'a> {
+    Lens(LensArc),
+    Band {
+        design: &'a Design,
+        u0: f64,
+        u1: f64,
+        v: f64,
+    },
+}
+
+impl BaseSection<'_> {
+    /// The point at t ∈ [0, 1]; t = 0 and t = 1 are the creases bit for bit.
+    pub fn point(&self, t: f64) -> DVec3 {
+        match *self {
+            BaseSection::Lens(arc) => arc.point(t),
+            BaseSection::Band { design, u0, u1, v } => {
+                let u = if t == 1.0 { u1 } else { u0 + t * (u1 - u0) };
+                design.base_surface(u, v)
+            }
+        }
+    }
+
+    /// Segments across that keep the chordal error within `e` (mm): from the
+    /// arc's radius for a lens, from the measured mid-span sag for a band
+    /// (s is smooth on a period's scale, so the sag falls as 1/segments²).
+    pub fn columns(&self, e: f64) -> usize {
+        match *self {
+            BaseSection::Lens(arc) => {
+                crate::mesher::columns_for(arc.radius, 2.0 * arc.half_angle, e)
+            }
+            BaseSection::Band { .. } => {
+                let sag = (self.point(0.5) - 0.5 * (self.point(0.0) + self.point(1.0))).length();
+                ((sag / e).sqrt().ceil() as usize).max(1)
+            }
+        }
     }
 }
 
@@ -226,6 +298,7 @@ mod tests {
                     rule: LensRule::ConstantAfov,
                 },
                 base: BaseParams {
+                    kind: BaseKind::DualLens,
                     a,
                     d: None,
                     levels: 0.0,

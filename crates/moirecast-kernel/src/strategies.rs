@@ -94,7 +94,7 @@ prop_compose! {
             height,
             period,
             lens: LensParams { afov: afov.to_radians(), index, rule: if equal_radius { LensRule::EqualRadius } else { LensRule::ConstantAfov } },
-            base: BaseParams { a, d: d_scale.map(|s| s * std.focal_depth), levels, afov: None },
+            base: BaseParams { kind: BaseKind::DualLens, a, d: d_scale.map(|s| s * std.focal_depth), levels, afov: None },
             profile,
             tolerance: (tol_scale * std.sag).max(Tolerance::MIN_MM),
         };

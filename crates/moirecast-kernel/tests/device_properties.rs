@@ -254,7 +254,7 @@ prop_compose! {
         let mut p = DesignParams::with_defaults(surface, (lenses as f64 + fraction) * period, height, period);
         p.lens.afov = afov.to_radians();
         p.lens.index = index;
-        p.base = BaseParams { a, d, levels, afov: None };
+        p.base = BaseParams { kind: BaseKind::DualLens, a, d, levels, afov: None };
         p.profile = profile;
         p.tolerance = tolerance_scale * StandardLens::new(period, p.lens.afov, index.max(1.01)).sag;
         p

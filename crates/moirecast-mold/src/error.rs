@@ -65,6 +65,10 @@ pub enum MoldError {
         problem: String,
         fix: String,
     },
+    /// The design is a printed (multi-material) device: it has black bands
+    /// inside a clear body and is printed, not cast in one material.
+    #[error("a printed (multi-material) device is printed, not cast: its black bands sit inside the clear body, which one silicone pour cannot make. Fix: `moirecast device` writes its STLs and 3MF for the printer; for a castable device set base.kind = \"dual-lens\"")]
+    NotCastable,
     /// manifold-rust reported a status other than `NoError` for an operand or
     /// a result. An invalid operand silently becomes empty, so every one is
     /// checked; this is a bug in moirecast, not in the spec.

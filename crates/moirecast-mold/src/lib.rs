@@ -139,6 +139,9 @@ pub fn build_mold(
     p: &MoldParams,
     progress: &dyn Progress,
 ) -> Result<Mold> {
+    if let moirecast_kernel::BaseKind::Printed(_) = design.params.base.kind {
+        return Err(MoldError::NotCastable);
+    }
     p.validate()?;
     progress.stage("placing mold features", 1);
     let posed = PosedDevice::new(design, device, p.flip, p.shrink_scale)?;

@@ -1,11 +1,13 @@
 //! One frame: an orthographic view of the device, tilted, lit by a lateral
 //! area light below it (the dual-lens moiré selects the direction light
-//! comes from), with stratified supersampling. Deterministic for a seed.
+//! comes from) or, for a printed device, by a diffuse backlight behind its
+//! black bands, with stratified supersampling. Deterministic for a seed.
 
 use crate::scene::Scene;
 use crate::trace::{radiance, SplitMix64};
 use glam::{DMat3, DVec3};
-use moirecast_kernel::{Design, PitchSurface};
+use moirecast_kernel::mesher::DeviceMesh;
+use moirecast_kernel::{BaseKind, Design, KernelError, Mesh, PitchSurface};
 use rayon::prelude::*;
 
 /// How to render one frame.
@@ -46,6 +48,40 @@ pub fn lateral_light(d: DVec3) -> f64 {
     (0.5 + 0.5 * d.x / LIGHT_EDGE).clamp(0.0, 1.0)
 }
 
+/// The diffuse backlight of a printed device (METHOD §8): every direction
+/// leaving the device downwards reaches it; nothing is lit above.
+pub fn backlight(d: DVec3) -> f64 {
+    if d.z < 0.0 {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// The light a design is seen in: a backlight behind a printed device's
+/// bands, the lateral light for a dual-lens device, whose moiré selects the
+/// direction light comes from.
+pub fn light_for(design: &Design) -> fn(DVec3) -> f64 {
+    match design.params.base.kind {
+        BaseKind::Printed(_) => backlight,
+        BaseKind::DualLens => lateral_light,
+    }
+}
+
+/// What the tracer sees of a device: its mesh and, per triangle, whether it
+/// absorbs. A dual-lens device is its mesh, all dielectric. A printed device
+/// is its clear body, whose faces shared with the black bands absorb (the
+/// black material is opaque): the very clear body that is printed.
+pub fn traced_mesh(design: &Design, dm: &DeviceMesh) -> Result<(Mesh, Vec<bool>), KernelError> {
+    match design.params.base.kind {
+        BaseKind::DualLens => Ok((dm.mesh.clone(), vec![false; dm.mesh.triangles.len()])),
+        BaseKind::Printed(_) => {
+            let bodies = moirecast_kernel::printed::printed_bodies(design, dm)?;
+            Ok((bodies.clear, bodies.clear_on_band))
+        }
+    }
+}
+
 /// Layout (u, v) of a point on the device's top seen at (x, y).
 fn layout_of(design: &Design, x: f64, y: f64) -> (f64, f64) {
     match design.params.surface {
@@ -66,6 +102,7 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
     let pixel = extent / view.width.max(view.height) as f64;
     let back = (hi - lo).length() + 1.0;
     let levels = design.params.base.levels;
+    let light = light_for(design);
     let n = view.samples.max(1);
     let pixels: Vec<(f64, f64)> = (0..view.width * view.height)
         .into_par_iter()
@@ -87,7 +124,7 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
                     design.params.lens.index,
                     target - back * dir,
                     dir,
-                    &lateral_light,
+                    &light,
                     &mut rng,
                 );
             }

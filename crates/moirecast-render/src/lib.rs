@@ -4,7 +4,8 @@
 //! This is the foundation of `moirecast render`: the scene (a BVH over the
 //! device mesh, exact f64 intersections), dielectric optics (Snell,
 //! Fresnel, total internal reflection), a deterministic tracer, and
-//! [`fidelity`]. Cameras, lights, tilt sweeps and the command come next.
+//! [`fidelity`]; [`frame`] lights and views it (a lateral light for the
+//! dual-lens device, a backlight behind a printed device's absorbing bands).
 
 pub mod fidelity;
 pub mod frame;

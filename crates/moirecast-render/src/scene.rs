@@ -10,6 +10,27 @@ use obvhs::ray::{Ray, RayHit};
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 
+/// Deepest BVH that obvhs's 32-entry traversal stack holds with room to spare.
+const MAX_BVH_DEPTH: u32 = 30;
+
+/// Levels of inner nodes below the root (the root is level 1).
+fn depth(bvh: &CwBvh) -> u32 {
+    if bvh.nodes.is_empty() {
+        return 0;
+    }
+    let (mut stack, mut deepest) = (vec![(0u32, 1u32)], 0);
+    while let Some((n, d)) = stack.pop() {
+        deepest = deepest.max(d);
+        let node = &bvh.nodes[n as usize];
+        for ch in 0..8 {
+            if !node.is_child_empty(ch) && !node.is_leaf(ch) {
+                stack.push((node.child_node_index(ch), d + 1));
+            }
+        }
+    }
+    deepest
+}
+
 /// The nearest intersection of a ray with the mesh.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
@@ -22,9 +43,30 @@ pub struct Hit {
 pub struct Scene<'m> {
     mesh: &'m Mesh,
     bvh: CwBvh,
+    /// Per triangle: it absorbs every ray that reaches it (a printed
+    /// device's black bands). Empty: every face is a dielectric interface.
+    absorbing: Vec<bool>,
 }
 
 impl<'m> Scene<'m> {
+    /// A scene of `mesh` whose faces are `absorbing` (true) or dielectric.
+    pub fn with_absorbing(mesh: &'m Mesh, absorbing: Vec<bool>) -> Self {
+        assert_eq!(
+            absorbing.len(),
+            mesh.triangles.len(),
+            "one flag per triangle"
+        );
+        Scene {
+            absorbing,
+            ..Self::new(mesh)
+        }
+    }
+
+    /// Whether triangle `tri` absorbs the rays that reach it.
+    pub fn absorbs(&self, tri: u32) -> bool {
+        self.absorbing.get(tri as usize).copied().unwrap_or(false)
+    }
+
     pub fn new(mesh: &'m Mesh) -> Self {
         let tris: Vec<Triangle> = mesh
             .triangles
@@ -38,12 +80,25 @@ impl<'m> Scene<'m> {
                 }
             })
             .collect();
-        let bvh = build_cwbvh_from_tris(
-            &tris,
-            BvhBuildParams::medium_build(),
-            &mut std::time::Duration::default(),
-        );
-        Scene { mesh, bvh }
+        let build = |params| build_cwbvh_from_tris(&tris, params, &mut Default::default());
+        let mut bvh = build(BvhBuildParams::medium_build());
+        // obvhs traverses with a fixed stack of 32 entries that silently
+        // overwrites its top when full, which would lose hits. The medium
+        // build can go that deep on many long, thin, stacked triangles (a
+        // printed device's layers: depth ≥ 32 where the slow build gives 22).
+        if depth(&bvh) >= MAX_BVH_DEPTH {
+            bvh = build(BvhBuildParams::slow_build());
+            let d = depth(&bvh);
+            assert!(
+                d < MAX_BVH_DEPTH,
+                "the BVH is {d} levels deep; obvhs traverses at most {MAX_BVH_DEPTH}"
+            );
+        }
+        Scene {
+            mesh,
+            bvh,
+            absorbing: Vec::new(),
+        }
     }
 
     /// The mesh the scene was built over.

@@ -31,7 +31,8 @@ pub const MAX_BOUNCES: usize = 32;
 const EPSILON_MM: f64 = 1e-7;
 
 /// The radiance arriving along `-dir` at `origin`: `environment(d)` for the
-/// direction `d` the path finally leaves the mesh in.
+/// direction `d` the path finally leaves the mesh in, or 0 where it meets
+/// an absorbing face.
 pub fn radiance(
     scene: &Scene,
     index: f64,
@@ -44,6 +45,9 @@ pub fn radiance(
         let Some(hit) = scene.intersect(origin, dir, EPSILON_MM) else {
             return environment(dir);
         };
+        if scene.absorbs(hit.triangle) {
+            return 0.0;
+        }
         let leaving = dir.dot(hit.normal) > 0.0;
         let (normal, n1, n2) = if leaving {
             (-hit.normal, index, 1.0)

@@ -1,13 +1,16 @@
 //! The moiré, rendered, on small designs (METHOD §8): a level-line moiré
 //! of rings has high fidelity at some tilt; defocusing the base, scrambling
 //! its shift, or flattening it takes the level lines away; and frames are
-//! deterministic for a seed.
+//! deterministic for a seed. A printed device shows the rings against its
+//! backlight.
 
 use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::profile::{Raster, SampledProfile};
 use moirecast_kernel::progress::Silent;
-use moirecast_kernel::{Design, DesignParams, PitchSurface, Profile, ProfileMode};
-use moirecast_render::frame::{render, Frame, View};
+use moirecast_kernel::{
+    BaseKind, Design, DesignParams, PitchSurface, PrintedBase, Profile, ProfileMode,
+};
+use moirecast_render::frame::{render, traced_mesh, Frame, View};
 use moirecast_render::{fidelity, Scene};
 
 const SIZE: f64 = 16.0;
@@ -55,9 +58,10 @@ fn scrambled() -> Design {
 
 fn frame(phase_of: &Design, device: &Design, tilt: f64, seed: u64) -> Frame {
     let dm = mesh_device(device, &Silent).unwrap();
+    let (mesh, absorbing) = traced_mesh(device, &dm).unwrap();
     render(
         phase_of,
-        &Scene::new(&dm.mesh),
+        &Scene::with_absorbing(&mesh, absorbing),
         View {
             width: 128,
             height: 128,
@@ -93,6 +97,27 @@ fn the_rings_moire_and_what_destroys_it() {
     assert!(defocused < best - 0.2, "defocused {defocused} vs {best}");
     assert!(scrambled < 0.15, "scrambled {scrambled}");
     assert!(flat < 0.15, "flat {flat}");
+}
+
+/// The printed device (METHOD §5.2) under its backlight: the rings show
+/// through the clear gaps between black bands; with no shift they do not.
+#[test]
+fn a_printed_device_shows_the_rings_against_a_backlight() {
+    let printed = |levels: f64| {
+        let mut p = rings(levels, None).params;
+        p.base.kind = BaseKind::Printed(PrintedBase::default());
+        Design::new(p).unwrap()
+    };
+    let (good, flat) = (printed(1.0), printed(0.0));
+    let best = best_fidelity(&good, &good);
+    let unshifted = best_fidelity(&good, &flat);
+    let f = frame(&good, &good, 0.0, 1);
+    let mean = f.luminance.iter().sum::<f64>() / f.luminance.len() as f64;
+    eprintln!("printed fidelity: rings {best:.3}, flat {unshifted:.3}; mean luminance {mean:.3}");
+    assert!(best >= 0.8, "printed rings {best}");
+    assert!(unshifted < 0.15, "printed flat {unshifted}");
+    // half the base is black: roughly half the backlight comes through
+    assert!(mean > 0.2 && mean < 0.8, "mean luminance {mean}");
 }
 
 #[test]

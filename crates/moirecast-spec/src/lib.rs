@@ -7,7 +7,7 @@
 
 use moirecast_kernel::{
     profile::SampledProfile, BaseParams, Design, DesignError, DesignParams, LensParams, LensRule,
-    Param, PitchSurface, Profile, ProfileMode, Raster,
+    Param, PitchSurface, PrintedBase, Profile, ProfileMode, Raster,
 };
 use moirecast_mold::{MoldError, MoldParam, MoldParams};
 use serde::Deserialize;
@@ -36,6 +36,7 @@ pub const DEFAULTS: &str = "\
 surface.kind = \"saddle\", surface.radius = 60 mm; layout 60 × 60 mm, period 0.5 mm;
 lens.afov = 60°, lens.index = 1.41 (Sylgard 184), lens.rule = \"constant-afov\";
 base.kind = \"dual-lens\", base.a = 0, base.d = \"focal\", base.levels = 1, base.afov = lens.afov;
+printed bases (base.kind = \"printed\"): base.duty = 0.5, base.band_thickness = 0.2 mm, base.backing = 1.0 mm;
 profile.kind = \"rings\" (wavelength = min(width, height)/4) unless profile.image is given;
 profile.mode = \"shape\", blur = 1 mm, threshold = 0.5, invert = false; mesh.tolerance = 0.002 mm;
 mold: wall_thickness = 10, gate_diameter = 1.0, sprue_diameter = 3.2, pour_cone_diameter = 7,
@@ -80,6 +81,9 @@ pub fn key_of(p: Param) -> &'static str {
         Param::BaseA => "base.a",
         Param::BaseD => "base.d",
         Param::Levels => "base.levels",
+        Param::Duty => "base.duty",
+        Param::BandThickness => "base.band_thickness",
+        Param::Backing => "base.backing",
         Param::Blur => "profile.blur",
         Param::Tolerance => "mesh.tolerance",
         Param::ProfileImage => "profile.image",
@@ -117,6 +121,7 @@ pub fn describe_mold_error(file: &str, e: &MoldError) -> String {
         } => {
             format!("spec `{file}`: {e} (key `{}`)", mold_key_of(*param))
         }
+        MoldError::NotCastable => format!("spec `{file}`: `base.kind` = \"printed\": {e}"),
         _ => e.to_string(),
     }
 }
@@ -248,6 +253,9 @@ struct BaseTable {
     d: Distance,
     levels: f64,
     afov: Option<f64>,
+    duty: Option<f64>,
+    band_thickness: Option<f64>,
+    backing: Option<f64>,
 }
 impl Default for BaseTable {
     fn default() -> Self {
@@ -257,6 +265,9 @@ impl Default for BaseTable {
             d: Distance::Named("focal".into()),
             levels: 1.0,
             afov: None,
+            duty: None,
+            band_thickness: None,
+            backing: None,
         }
     }
 }
@@ -538,15 +549,49 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         (None, None) => 1.41,
     };
 
-    if raw.base.kind == BaseKind::Printed {
-        return Err(invalid(
-            file,
-            "base.kind",
-            "\"printed\"",
-            "the printed (multi-material) base is not built yet",
-            "use kind = \"dual-lens\"",
-        ));
-    }
+    let base_kind = match raw.base.kind {
+        BaseKind::DualLens => {
+            let printed_only = [
+                ("base.duty", raw.base.duty),
+                ("base.band_thickness", raw.base.band_thickness),
+                ("base.backing", raw.base.backing),
+            ];
+            if let Some((key, Some(v))) = printed_only.into_iter().find(|(_, v)| v.is_some()) {
+                return Err(invalid(
+                    file,
+                    key,
+                    v,
+                    "only a printed base has bands",
+                    "remove it, or set base.kind = \"printed\"",
+                ));
+            }
+            moirecast_kernel::BaseKind::DualLens
+        }
+        BaseKind::Printed => {
+            if let Some(afov) = raw.base.afov {
+                return Err(invalid(
+                    file,
+                    "base.afov",
+                    afov,
+                    "a printed base has no lenses",
+                    "remove it, or set base.kind = \"dual-lens\"",
+                ));
+            }
+            let defaults = PrintedBase::default();
+            let key = |key: &'static str, v: Option<f64>, default: f64| {
+                v.map_or(Ok(default), |v| finite(file, key, v))
+            };
+            moirecast_kernel::BaseKind::Printed(PrintedBase {
+                duty: key("base.duty", raw.base.duty, defaults.duty)?,
+                band_thickness: key(
+                    "base.band_thickness",
+                    raw.base.band_thickness,
+                    defaults.band_thickness,
+                )?,
+                backing: key("base.backing", raw.base.backing, defaults.backing)?,
+            })
+        }
+    };
     let d = match &raw.base.d {
         Distance::Mm(d) => Some(finite(file, "base.d", *d)?),
         Distance::Named(n) if n == "focal" => None,
@@ -694,6 +739,7 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
             },
         },
         base: BaseParams {
+            kind: base_kind,
             a: finite(file, "base.a", raw.base.a)?,
             d,
             levels: finite(file, "base.levels", raw.base.levels)?,
@@ -832,11 +878,22 @@ mod tests {
     }
 
     #[test]
-    fn printed_bases_are_refused_until_they_exist() {
-        let e = parse_str("[base]\nkind = \"printed\"")
+    fn printed_bases_take_their_keys_and_defaults() {
+        let s = parse_str("[base]\nkind = \"printed\"\nduty = 0.4").unwrap();
+        let moirecast_kernel::BaseKind::Printed(pb) = s.design.params.base.kind else {
+            panic!("printed")
+        };
+        assert_eq!((pb.duty, pb.band_thickness, pb.backing), (0.4, 0.2, 1.0));
+        let e = parse_str("[base]\nduty = 0.4").unwrap_err().to_string();
+        assert!(e.contains("base.duty") && e.contains("printed"), "{e}");
+        let e = parse_str("[base]\nkind = \"printed\"\nafov = 40")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("base.kind"), "{e}");
+        assert!(e.contains("base.afov"), "{e}");
+        let e = parse_str("[base]\nkind = \"printed\"\nduty = 1.2")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("base.duty") && e.contains("0.95"), "{e}");
     }
 
     #[test]

@@ -1,0 +1,105 @@
+//! Benchmark of the printed (multi-material) device (METHOD §5.2): the
+//! reference geometry (120 lenses on a saddle, 2 µm) with a printed base,
+//! from spec to `device-clear.stl`, `device-black.stl`, `device.3mf` and
+//! `report.json` on disk, with per-stage medians.
+//!
+//! `cargo bench --bench printed [-- SPEC [RUNS]]`
+
+use moirecast_kernel::printed::printed_bodies;
+use moirecast_kernel::progress::Silent;
+use std::time::Instant;
+
+mod common;
+use common::median;
+
+fn main() {
+    let (spec_path, runs) = common::spec_and_runs(7);
+    let spec_path = if spec_path.ends_with("saddle-horse.toml") {
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/molds/saddle-camera-printed.toml"
+        )
+        .to_string()
+    } else {
+        spec_path
+    };
+    let out = std::env::temp_dir().join(format!("moirecast-bench-printed-{}", std::process::id()));
+    let (mut total, mut load, mut build_t, mut bodies_t, mut printed_t) =
+        (vec![], vec![], vec![], vec![], vec![]);
+    let mut triangles = 0;
+    for _ in 0..runs {
+        let t0 = Instant::now();
+        let spec = moirecast_spec::load(std::path::Path::new(&spec_path)).unwrap();
+        let t1 = Instant::now();
+        let outcome = moirecast::run_device(
+            &spec,
+            &out,
+            moirecast::Thoroughness::Sampled,
+            moirecast::Mesher::Direct,
+            &Silent,
+        )
+        .unwrap();
+        let t2 = Instant::now();
+        triangles = outcome.triangles;
+        total.push((t2 - t0).as_secs_f64());
+        load.push((t1 - t0).as_secs_f64());
+        // the stages again, one by one
+        let t3 = Instant::now();
+        let build = moirecast::build_device(&spec.design, &Silent).unwrap();
+        let t4 = Instant::now();
+        let bodies = printed_bodies(&spec.design, &build.mesh).unwrap();
+        let t5 = Instant::now();
+        let printed = moirecast::printed::build_printed(&spec.design, &build).unwrap();
+        let t6 = Instant::now();
+        assert_eq!(bodies.bands, printed.report.bands);
+        let clear = moirecast_kernel::check::SolidMesh::validate_for(
+            &bodies.clear,
+            moirecast_kernel::check::SolidSpec {
+                genus: bodies.clear_genus,
+                ..moirecast_kernel::check::SolidSpec::DEVICE
+            },
+        )
+        .1
+        .unwrap();
+        let t7 = Instant::now();
+        let xml = moirecast_export::model_xml(&[moirecast_export::Object {
+            name: "clear",
+            solid: clear,
+            material: moirecast::printed::CLEAR,
+        }]);
+        let t8 = Instant::now();
+        let bytes = moirecast_export::threemf_bytes(
+            "device.3mf",
+            &[moirecast_export::Object {
+                name: "clear",
+                solid: clear,
+                material: moirecast::printed::CLEAR,
+            }],
+        )
+        .unwrap();
+        let t9 = Instant::now();
+        let stl = moirecast_export::stl_bytes("device-clear.stl", clear).unwrap();
+        let t10 = Instant::now();
+        eprintln!(
+            "clear: xml {:.0} ms ({} MB), 3mf {:.0} ms ({} MB), stl {:.0} ms ({} MB)",
+            (t8 - t7).as_secs_f64() * 1e3,
+            xml.len() / 1000000,
+            (t9 - t8).as_secs_f64() * 1e3,
+            bytes.len() / 1000000,
+            (t10 - t9).as_secs_f64() * 1e3,
+            stl.len() / 1000000
+        );
+        build_t.push((t4 - t3).as_secs_f64());
+        bodies_t.push((t5 - t4).as_secs_f64());
+        printed_t.push((t6 - t5).as_secs_f64() - (t5 - t4).as_secs_f64());
+    }
+    let ms = |v: Vec<f64>| median(v) * 1e3;
+    common::print_header(&spec_path, runs);
+    println!("triangles         {triangles} (clear and black)");
+    println!("spec to files     {:8.1} ms   (goal < 500 ms)", ms(total));
+    println!("  spec + profile  {:8.1} ms", ms(load));
+    println!("  mesh + measure  {:8.1} ms", ms(build_t));
+    println!("  bodies          {:8.1} ms", ms(bodies_t));
+    println!("  body checks     {:8.1} ms", ms(printed_t));
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -1,0 +1,455 @@
+//! The printed (multi-material) device of METHOD §5.2: a clear body over
+//! black bands, as two closed meshes that share their common faces.
+//!
+//! **Layers are measured along −z.** METHOD §5.2 offsets the band layer and
+//! the backing along −n_s. We offset along −z, the draw and print
+//! direction, for three reasons: every layer vertex then lies exactly below
+//! a vertex of s, so the walls stay exactly vertical (METHOD §5.3) and need
+//! no further solves; band sides are vertical, exactly planar quads that no
+//! printer sees as overhangs; and the two bodies share every vertex by
+//! construction. The top of the bands — the only face the optics sees — is
+//! s itself, with its edges exactly on φ ∈ ℤ and φ ∈ ℤ + duty. The layer is
+//! t_b thick along z, which is t_b·cos(slope) along the normal.
+//!
+//! **Construction.** The device mesher meshes the revealer, the walls and s
+//! with the band edges as creases ([`crate::Design::crease_phase`]). Here
+//! s is copied to z − t_b (the bands' bottom) and to z − t_b − t_back (the
+//! backing's bottom), and every boundary edge of a band becomes a vertical
+//! quad: a side face shared by both bodies inside the outline, an end cap of
+//! the band on the walls.
+
+use crate::design::{BaseKind, Design, PrintedBase};
+use crate::error::{KernelError, Result};
+use crate::mesh::Mesh;
+use crate::mesher::{DeviceMesh, Patch};
+use crate::model::LensRef;
+use crate::tolerance::WALL_SNAP_MM;
+use glam::DVec3;
+
+/// The two bodies of a printed device and the slab they fill.
+#[derive(Clone, Debug)]
+pub struct PrintedBodies {
+    /// Lens surface down to the backing's bottom, minus the bands.
+    pub clear: Mesh,
+    /// The black bands: one closed shell per band.
+    pub black: Mesh,
+    /// Clear and black together: the whole device as one solid, to measure
+    /// that the two fill it without gap or overlap.
+    pub slab: Mesh,
+    /// Per triangle of `clear`: it is a face shared with the bands (their
+    /// tops, sides or bottoms), where a renderer absorbs.
+    pub clear_on_band: Vec<bool>,
+    /// Number of band shells in `black`.
+    pub bands: u32,
+    /// Through-holes of `clear`: a band whose ends meet the walls in two
+    /// separate places tunnels through the clear body.
+    pub clear_genus: u32,
+    /// Area of s inside the outline projected on xy (mm²).
+    pub layer_area: f64,
+    /// Area of the bands' tops projected on xy (mm²).
+    pub black_area: f64,
+    /// The same two areas over whole periods only: periods neither of
+    /// whose two sections meets an x-wall (the walls cut the others).
+    pub layer_area_whole: f64,
+    pub black_area_whole: f64,
+}
+
+/// Depth layers below s.
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+enum Layer {
+    Top,
+    BandBottom,
+    Bottom,
+}
+
+/// A mesh built from vertices of the device mesh at a depth layer, each
+/// made once, numbered in first-use order (deterministic).
+struct Body<'a> {
+    source: &'a [DVec3],
+    depths: (f64, f64),
+    /// Index in this body of (source vertex, layer), or `u32::MAX`.
+    index: Vec<u32>,
+    /// Source vertex of each vertex of this body.
+    origin: Vec<u32>,
+    mesh: Mesh,
+}
+
+impl<'a> Body<'a> {
+    fn new(source: &'a [DVec3], pb: &PrintedBase) -> Self {
+        Body {
+            source,
+            depths: (pb.band_thickness, pb.band_thickness + pb.backing),
+            index: vec![u32::MAX; 3 * source.len()],
+            origin: Vec::new(),
+            mesh: Mesh::default(),
+        }
+    }
+
+    fn vertex(&mut self, v: u32, layer: Layer) -> u32 {
+        let slot = 3 * v as usize + layer as usize;
+        if self.index[slot] != u32::MAX {
+            return self.index[slot];
+        }
+        let p = self.source[v as usize];
+        let depth = match layer {
+            Layer::Top => 0.0,
+            Layer::BandBottom => self.depths.0,
+            Layer::Bottom => self.depths.1,
+        };
+        let i = self.mesh.positions.len() as u32;
+        self.mesh.positions.push(DVec3::new(p.x, p.y, p.z - depth));
+        self.origin.push(v);
+        self.index[slot] = i;
+        i
+    }
+
+    fn triangle(&mut self, t: [u32; 3], layer: Layer, flip: bool) {
+        let [a, b, c] = t.map(|v| self.vertex(v, layer));
+        self.mesh
+            .triangles
+            .push(if flip { [a, c, b] } else { [a, b, c] });
+    }
+
+    /// The vertical quad below directed edge a→b between two layers, made
+    /// to pair with a face above that holds b→a at `upper` and a face below
+    /// that holds a→b at `lower` (or the reverse when `flip`).
+    fn quad(&mut self, (a, b): (u32, u32), upper: Layer, lower: Layer, flip: bool) {
+        let (a0, b0, a1, b1) = (
+            self.vertex(a, upper),
+            self.vertex(b, upper),
+            self.vertex(a, lower),
+            self.vertex(b, lower),
+        );
+        if flip {
+            self.mesh.triangles.push([a0, b1, b0]);
+            self.mesh.triangles.push([a0, a1, b1]);
+        } else {
+            self.mesh.triangles.push([a0, b0, b1]);
+            self.mesh.triangles.push([a0, b1, a1]);
+        }
+    }
+}
+
+/// Extends `flags` to every triangle of `body` made so far with `value`.
+fn mark(body: &Body, flags: &mut Vec<bool>, value: bool) {
+    flags.resize(body.mesh.triangles.len(), value);
+}
+
+/// Area of a triangle projected on xy.
+fn xy_area(m: &[DVec3], t: &[u32; 3]) -> f64 {
+    let [a, b, c] = t.map(|i| m[i as usize]);
+    0.5 * ((b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y)).abs()
+}
+
+/// Builds the clear and black bodies from the device mesh of a printed
+/// design. The device mesh must be closed and oriented (it is checked
+/// before this runs); the bodies are checked by the caller.
+pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies> {
+    let BaseKind::Printed(pb) = design.params.base.kind else {
+        return Err(KernelError::MeshCheck {
+            name: "printed-base",
+            detail: "the design's base is not printed".into(),
+        });
+    };
+    let tris = &dm.mesh.triangles;
+    let pos = &dm.mesh.positions;
+    // s's triangles and the band each lies in
+    let band_of = |ti: usize| match dm.patches[ti] {
+        Patch::Lens(LensRef::Base(k)) => Some(design.is_black_band(k)),
+        _ => None,
+    };
+    // directed edges of s → black?
+    let s_tris: Vec<([u32; 3], bool)> = tris
+        .iter()
+        .enumerate()
+        .filter_map(|(ti, t)| band_of(ti).map(|black| (*t, black)))
+        .collect();
+    let on_s = EdgeMap::new(pos.len(), &s_tris);
+    let mut clear = Body::new(pos, &pb);
+    let mut clear_on_band: Vec<bool> = Vec::new();
+    let mut black = Body::new(pos, &pb);
+    let mut slab = Body::new(pos, &pb);
+    // the revealer and the upper walls belong to the clear body and the slab
+    for (ti, t) in tris.iter().enumerate() {
+        if band_of(ti).is_none() {
+            clear.triangle(*t, Layer::Top, false);
+            slab.triangle(*t, Layer::Top, false);
+        }
+    }
+    let (mut layer_area, mut black_area) = (0.0, 0.0);
+    // per period m: xy area of its band, of all of it, and whether it meets an x-wall
+    let mut periods: std::collections::BTreeMap<i64, (f64, f64, bool)> = Default::default();
+    let (xl, xr) = design.outline_x;
+    for (ti, t) in tris.iter().enumerate() {
+        let Some(is_black) = band_of(ti) else {
+            continue;
+        };
+        let area = xy_area(pos, t);
+        layer_area += area;
+        if let Patch::Lens(LensRef::Base(k)) = dm.patches[ti] {
+            let period = periods.entry(k.div_euclid(2)).or_default();
+            period.1 += area;
+            if is_black {
+                period.0 += area;
+            }
+            period.2 |= t.iter().any(|&v| {
+                let x = pos[v as usize].x;
+                (x - xl).abs() <= WALL_SNAP_MM || (x - xr).abs() <= WALL_SNAP_MM
+            });
+        }
+        // s faces down in the device mesh; the backing's bottom does too
+        clear.triangle(*t, Layer::Bottom, false);
+        slab.triangle(*t, Layer::Bottom, false);
+        if is_black {
+            black_area += area;
+            mark(&clear, &mut clear_on_band, false);
+            clear.triangle(*t, Layer::Top, false);
+            clear.triangle(*t, Layer::BandBottom, true);
+            mark(&clear, &mut clear_on_band, true);
+            black.triangle(*t, Layer::Top, true);
+            black.triangle(*t, Layer::BandBottom, false);
+        }
+        for e in 0..3 {
+            let edge = (t[e], t[(e + 1) % 3]);
+            match on_s.get(edge.1, edge.0) {
+                // interior edge of s: a band side where black meets clear
+                Some(other) => {
+                    if is_black && !other {
+                        black.quad(edge, Layer::Top, Layer::BandBottom, false);
+                        mark(&clear, &mut clear_on_band, false);
+                        clear.quad(edge, Layer::Top, Layer::BandBottom, true);
+                        mark(&clear, &mut clear_on_band, true);
+                    }
+                }
+                // on the outline: the lower wall
+                None => {
+                    slab.quad(edge, Layer::Top, Layer::Bottom, false);
+                    if is_black {
+                        black.quad(edge, Layer::Top, Layer::BandBottom, false);
+                    } else {
+                        clear.quad(edge, Layer::Top, Layer::BandBottom, false);
+                    }
+                    clear.quad(edge, Layer::BandBottom, Layer::Bottom, false);
+                }
+            }
+        }
+    }
+    mark(&clear, &mut clear_on_band, false);
+    let (bands, caps) = shells_and_caps(&black.mesh, &black.origin, &on_s);
+    let clear_genus = caps.iter().map(|&c| c.saturating_sub(1)).sum();
+    let whole = periods.values().filter(|p| !p.2);
+    let (black_area_whole, layer_area_whole) =
+        whole.fold((0.0, 0.0), |(b, l), p| (b + p.0, l + p.1));
+    Ok(PrintedBodies {
+        clear: clear.mesh,
+        clear_on_band,
+        black: black.mesh,
+        slab: slab.mesh,
+        bands,
+        clear_genus,
+        layer_area,
+        black_area,
+        layer_area_whole,
+        black_area_whole,
+    })
+}
+
+/// Directed edges a→b of a triangle set, each with a value, looked up by
+/// scanning a's few outgoing edges (CSR by a).
+struct EdgeMap<T> {
+    start: Vec<u32>,
+    to: Vec<(u32, T)>,
+}
+
+impl<T: Copy + Default> EdgeMap<T> {
+    fn new(vertices: usize, triangles: &[([u32; 3], T)]) -> Self {
+        let mut start = vec![0u32; vertices + 1];
+        for (t, _) in triangles {
+            for &a in t {
+                start[a as usize + 1] += 1;
+            }
+        }
+        for i in 0..vertices {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut to = vec![(0u32, T::default()); start[vertices] as usize];
+        for (t, value) in triangles {
+            for e in 0..3 {
+                let a = t[e] as usize;
+                to[fill[a] as usize] = (t[(e + 1) % 3], *value);
+                fill[a] += 1;
+            }
+        }
+        EdgeMap { start, to }
+    }
+
+    fn get(&self, a: u32, b: u32) -> Option<T> {
+        let a = a as usize;
+        self.to[self.start[a] as usize..self.start[a + 1] as usize]
+            .iter()
+            .find(|(to, _)| *to == b)
+            .map(|(_, v)| *v)
+    }
+}
+
+fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        parent[x as usize] = parent[parent[x as usize] as usize];
+        x = parent[x as usize];
+    }
+    x
+}
+
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (a, b) = (find(parent, a), find(parent, b));
+    parent[a.max(b) as usize] = a.min(b);
+}
+
+/// Connected shells of the black mesh and, per shell, the number of
+/// separate places where it meets the walls (connected groups of end caps).
+/// `origin` is the device-mesh vertex under each black vertex.
+fn shells_and_caps(black: &Mesh, origin: &[u32], on_s: &EdgeMap<bool>) -> (u32, Vec<u32>) {
+    let n = black.triangles.len() as u32;
+    // a vertical quad's triangle has two vertices over one source vertex;
+    // it is an end cap when its source edge lies on the outline (one-sided on s)
+    let is_cap = |t: &[u32; 3]| {
+        let o = t.map(|i| origin[i as usize]);
+        let (a, b) = if o[0] == o[1] {
+            (o[0], o[2])
+        } else if o[1] == o[2] {
+            (o[1], o[0])
+        } else if o[0] == o[2] {
+            (o[0], o[1])
+        } else {
+            return false;
+        };
+        on_s.get(a, b).is_none() || on_s.get(b, a).is_none()
+    };
+    let caps: Vec<bool> = black.triangles.iter().map(is_cap).collect();
+    let indexed: Vec<([u32; 3], u32)> = black
+        .triangles
+        .iter()
+        .enumerate()
+        .map(|(ti, t)| (*t, ti as u32))
+        .collect();
+    let by_edge = EdgeMap::new(black.positions.len(), &indexed);
+    // union over shared edges: all triangles (shells), and caps among caps
+    let mut shell: Vec<u32> = (0..n).collect();
+    let mut cap_group: Vec<u32> = (0..n).collect();
+    for (t, ti) in &indexed {
+        for e in 0..3 {
+            if let Some(tj) = by_edge.get(t[(e + 1) % 3], t[e]) {
+                union(&mut shell, *ti, tj);
+                if caps[*ti as usize] && caps[tj as usize] {
+                    union(&mut cap_group, *ti, tj);
+                }
+            }
+        }
+    }
+    let mut groups: std::collections::BTreeMap<u32, std::collections::BTreeSet<u32>> =
+        Default::default();
+    for ti in 0..n {
+        let root = find(&mut shell, ti);
+        let entry = groups.entry(root).or_default();
+        if caps[ti as usize] {
+            entry.insert(find(&mut cap_group, ti));
+        }
+    }
+    (
+        groups.len() as u32,
+        groups.values().map(|g| g.len() as u32).collect(),
+    )
+}
+
+/// The duty cycle measured on the output along lines y = const over s:
+/// the black share of each line between its first and its last band start
+/// (whole periods only; the walls cut partial periods at both ends).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LineDuty {
+    /// Black share over all lines' whole periods.
+    pub duty: f64,
+    /// Worst |line duty − duty| over the lines.
+    pub worst_line_deviation: f64,
+    /// Lines measured and whole periods crossed in all.
+    pub lines: usize,
+    pub periods: usize,
+}
+
+/// Measures the duty cycle of the bands of `dm` (a printed design's device
+/// mesh) along `lines` lines spread over the height, from the bands' top
+/// triangles projected on xy.
+pub fn duty_along_lines(design: &Design, dm: &DeviceMesh, lines: usize) -> LineDuty {
+    let hh = design.half_height;
+    let tris = &dm.mesh.triangles;
+    let pos = &dm.mesh.positions;
+    let black: Vec<[DVec3; 3]> = tris
+        .iter()
+        .zip(&dm.patches)
+        .filter(|(_, p)| matches!(p, Patch::Lens(LensRef::Base(k)) if design.is_black_band(*k)))
+        .map(|(t, _)| t.map(|i| pos[i as usize]))
+        .collect();
+    let target = match design.params.base.kind {
+        BaseKind::Printed(pb) => pb.duty,
+        BaseKind::DualLens => 0.0,
+    };
+    let (mut black_len, mut window_len, mut periods, mut worst) = (0.0, 0.0, 0, 0.0f64);
+    for l in 0..lines {
+        let y = -hh + 2.0 * hh * (l as f64 + 0.5) / lines as f64;
+        let mut spans: Vec<(f64, f64)> = black
+            .iter()
+            .filter_map(|t| line_through_triangle(t, y))
+            .collect();
+        spans.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut merged: Vec<(f64, f64)> = Vec::new();
+        for (a, b) in spans {
+            match merged.last_mut() {
+                Some(last) if a <= last.1 + 1e-9 => last.1 = last.1.max(b),
+                _ => merged.push((a, b)),
+            }
+        }
+        let (xl, _) = design.outline_x;
+        // band starts: left ends not on the left wall
+        let starts: Vec<f64> = merged
+            .iter()
+            .map(|s| s.0)
+            .filter(|&x| x > xl + 1e-6)
+            .collect();
+        if starts.len() < 2 {
+            continue;
+        }
+        let (w0, w1) = (starts[0], *starts.last().unwrap());
+        let inside: f64 = merged
+            .iter()
+            .map(|&(a, b)| (b.min(w1) - a.max(w0)).max(0.0))
+            .sum();
+        black_len += inside;
+        window_len += w1 - w0;
+        periods += starts.len() - 1;
+        worst = worst.max((inside / (w1 - w0) - target).abs());
+    }
+    LineDuty {
+        duty: if window_len > 0.0 {
+            black_len / window_len
+        } else {
+            f64::NAN
+        },
+        worst_line_deviation: worst,
+        lines,
+        periods,
+    }
+}
+
+/// The x-interval where the line y = `y` crosses triangle `t` projected on xy.
+fn line_through_triangle(t: &[DVec3; 3], y: f64) -> Option<(f64, f64)> {
+    let mut xs = Vec::with_capacity(3);
+    for e in 0..3 {
+        let (a, b) = (t[e], t[(e + 1) % 3]);
+        if (a.y - y) * (b.y - y) <= 0.0 && a.y != b.y {
+            xs.push(a.x + (b.x - a.x) * (y - a.y) / (b.y - a.y));
+        }
+    }
+    let lo = xs.iter().cloned().fold(f64::INFINITY, f64::min);
+    let hi = xs.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    (hi > lo).then_some((lo, hi))
+}

@@ -1,0 +1,232 @@
+//! `moirecast device` for a printed (multi-material) design (METHOD §5.2):
+//! the clear body and the black bands as two STLs and one 3MF, checked
+//! before anything is written.
+
+use crate::report::{self, FileReport};
+use crate::{commit_with_report, refuse_failed, DeviceBuild, DeviceOutcome};
+use anyhow::{Context, Result};
+use moirecast_export::{stl_bytes, threemf_bytes, Material, Object, OutputSet};
+use moirecast_kernel::check::{CheckResult, SolidMesh, SolidSpec};
+use moirecast_kernel::printed::{duty_along_lines, printed_bodies, LineDuty, PrintedBodies};
+use moirecast_kernel::progress::Progress;
+use moirecast_kernel::{BaseKind, Design, PrintedBase};
+use moirecast_spec::Spec;
+use serde::Serialize;
+use std::path::Path;
+
+/// Sample lines for the duty cycle along lines.
+const DUTY_LINES: usize = 33;
+/// How closely the two bodies must add up to the whole device (relative):
+/// they share every vertex, so only round-off separates the sums.
+const FILL_RELATIVE: f64 = 1e-9;
+
+/// The clear material's display colour: a light, translucent blue-grey.
+pub const CLEAR: Material = Material {
+    name: "clear",
+    display_color: [0xE6, 0xF0, 0xFA, 0x80],
+};
+/// The black material.
+pub const BLACK: Material = Material {
+    name: "black",
+    display_color: [0x10, 0x10, 0x10, 0xFF],
+};
+
+/// The printed device's numbers in `report.json`.
+#[derive(Serialize, Clone, Debug)]
+pub struct PrintedReport {
+    /// Band shells in `device-black.stl`.
+    pub bands: u32,
+    /// Through-holes of `device-clear.stl` (bands that tunnel through it).
+    pub clear_genus: u32,
+    pub clear_volume_mm3: f64,
+    pub black_volume_mm3: f64,
+    /// The whole device (clear and black together) as one solid.
+    pub device_volume_mm3: f64,
+    /// The band layer: the outline's area of s times t_b.
+    pub band_layer_volume_mm3: f64,
+    pub duty: DutyReport,
+}
+
+/// The duty cycle, asked and measured two ways on the output. These are
+/// measurements, not checks: the invariant is that band edges lie on
+/// φ ∈ ℤ and φ ∈ ℤ + duty (`base-creases-follow-shift`, to 1e-8 periods).
+/// Where the elevation bends within a period, a band's share of its period
+/// in x departs from its share in φ: by 0.1 % on the shipped example, by
+/// 1.5 % on a 4 mm design with a 1.5 mm bump.
+#[derive(Serialize, Clone, Debug)]
+pub struct DutyReport {
+    pub asked: f64,
+    /// Black volume / band-layer volume over whole periods (the walls cut
+    /// the first and last period of each line anywhere).
+    pub by_volume: f64,
+    /// The same over the whole layer, partial periods at the walls included.
+    pub by_volume_whole_layer: f64,
+    /// Black share along lines y = const over whole periods.
+    pub along_lines: f64,
+    pub worst_line_deviation: f64,
+    pub lines: usize,
+    pub periods: usize,
+}
+
+/// The two bodies of a printed design, with every check of them.
+pub struct PrintedBuild {
+    pub bodies: PrintedBodies,
+    pub checks: Vec<CheckResult>,
+    pub report: PrintedReport,
+}
+
+fn printed_base(design: &Design) -> PrintedBase {
+    match design.params.base.kind {
+        BaseKind::Printed(pb) => pb,
+        BaseKind::DualLens => unreachable!("callers build printed designs only"),
+    }
+}
+
+/// Builds the clear and black bodies from the checked device mesh and
+/// measures them: each a solid of the expected genus and shells, together
+/// exactly the device, and the duty cycle by volume and along lines.
+pub fn build_printed(design: &Design, build: &DeviceBuild) -> Result<PrintedBuild> {
+    let pb = printed_base(design);
+    let bodies = printed_bodies(design, &build.mesh).context("building the printed bodies")?;
+    let mut checks = Vec::new();
+    let solid = |genus, shells| SolidSpec {
+        genus,
+        shells,
+        ..SolidSpec::DEVICE
+    };
+    for (file, mesh, spec) in [
+        (
+            "device-clear.stl",
+            &bodies.clear,
+            solid(bodies.clear_genus, 1),
+        ),
+        ("device-black.stl", &bodies.black, solid(0, bodies.bands)),
+        ("the whole device", &bodies.slab, solid(0, 1)),
+    ] {
+        checks.extend(
+            moirecast_kernel::check::solid_checks_for(mesh, spec)
+                .into_iter()
+                .map(|mut c| {
+                    c.detail = format!("{file}: {}", c.detail);
+                    c
+                }),
+        );
+    }
+    let (clear, black, slab) = (
+        bodies.clear.volume(),
+        bodies.black.volume(),
+        bodies.slab.volume(),
+    );
+    checks.push(CheckResult::at_most(
+        "bodies-fill-device",
+        ((clear + black) - slab).abs() / slab,
+        FILL_RELATIVE,
+        "relative",
+        format!("|V(clear) + V(black) − V(device)| / V(device); V(device) = {slab:.6} mm³"),
+    ));
+    let layer = bodies.layer_area * pb.band_thickness;
+    // over whole periods: the walls cut the first and last period anywhere
+    let by_volume = bodies.black_area_whole / bodies.layer_area_whole;
+    let lines: LineDuty = duty_along_lines(design, &build.mesh, DUTY_LINES);
+    let report = PrintedReport {
+        bands: bodies.bands,
+        clear_genus: bodies.clear_genus,
+        clear_volume_mm3: clear,
+        black_volume_mm3: black,
+        device_volume_mm3: slab,
+        band_layer_volume_mm3: layer,
+        duty: DutyReport {
+            asked: pb.duty,
+            by_volume,
+            by_volume_whole_layer: black / layer,
+            along_lines: lines.duty,
+            worst_line_deviation: lines.worst_line_deviation,
+            lines: lines.lines,
+            periods: lines.periods,
+        },
+    };
+    Ok(PrintedBuild {
+        bodies,
+        checks,
+        report,
+    })
+}
+
+/// Writes `device-clear.stl`, `device-black.stl`, `device.3mf` and
+/// `report.json` for a printed design whose device mesh passed `checks`.
+pub(crate) fn write_printed_device(
+    spec: &Spec,
+    build: &DeviceBuild,
+    mut checks: Vec<CheckResult>,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<DeviceOutcome> {
+    progress.stage("printed bodies", 1);
+    let printed = build_printed(&spec.design, build)?;
+    checks.extend(printed.checks.iter().cloned());
+    refuse_failed(&checks)?;
+    progress.tick(1);
+    progress.stage("writing", 1);
+    let b = &printed.bodies;
+    let validated = |mesh, genus, shells| {
+        SolidMesh::validate_for(
+            mesh,
+            SolidSpec {
+                genus,
+                shells,
+                ..SolidSpec::DEVICE
+            },
+        )
+        .1
+        .context("the printed bodies passed their solid checks")
+    };
+    let clear = validated(&b.clear, b.clear_genus, 1)?;
+    let black = validated(&b.black, 0, b.bands)?;
+    let mut files = OutputSet::new();
+    let mut reports = std::collections::BTreeMap::new();
+    for (name, solid) in [("device-clear.stl", clear), ("device-black.stl", black)] {
+        let bytes = stl_bytes(name, solid)?;
+        reports.insert(name.to_string(), FileReport::of(solid.mesh(), bytes.len()));
+        files.add(name, bytes);
+    }
+    let threemf = threemf_bytes(
+        "device.3mf",
+        &[
+            Object {
+                name: "clear",
+                solid: clear,
+                material: CLEAR,
+            },
+            Object {
+                name: "black",
+                solid: black,
+                material: BLACK,
+            },
+        ],
+    )?;
+    files.add("device.3mf", threemf);
+    let report = report::device_report(
+        spec,
+        build,
+        &checks,
+        report::DeviceOutputs {
+            files: reports,
+            step: None,
+            printed: Some(printed.report.clone()),
+            crosscheck: None,
+        },
+    );
+    let (written, bytes) = commit_with_report(files, &report, out)?;
+    progress.tick(1);
+    Ok(DeviceOutcome {
+        written,
+        triangles: b.clear.triangles.len() + b.black.triangles.len(),
+        volume_mm3: printed.report.device_volume_mm3,
+        bytes,
+        checks: checks.len(),
+        worst_surface_error_mm: checks
+            .iter()
+            .find(|c| c.name == "surface-to-mesh")
+            .map_or(f64::NAN, |c| c.value),
+    })
+}
