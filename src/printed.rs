@@ -68,11 +68,46 @@ pub struct DutyReport {
     pub periods: usize,
 }
 
-/// The two bodies of a printed design, with every check of them.
+/// The two bodies of a printed design, with what was measured of them
+/// (their solid checks come with [`PrintedBuild::solids`]).
 pub struct PrintedBuild {
     pub bodies: PrintedBodies,
     pub checks: Vec<CheckResult>,
     pub report: PrintedReport,
+}
+
+impl PrintedBuild {
+    /// The solid checks (METHOD §7.1) of the clear body (its genus: one
+    /// tunnel per band that runs wall to wall), the black bands (one shell
+    /// each) and the whole device, run once; the two bodies as solids if
+    /// they all passed.
+    pub fn solids(&self) -> (Vec<CheckResult>, Option<[SolidMesh<'_>; 2]>) {
+        let b = &self.bodies;
+        let spec = |genus, shells| SolidSpec {
+            genus,
+            shells,
+            ..SolidSpec::DEVICE
+        };
+        let mut checks = Vec::new();
+        let mut solids = Vec::new();
+        for (file, mesh, spec) in [
+            ("device-clear.stl", &b.clear, spec(b.clear_genus, 1)),
+            ("device-black.stl", &b.black, spec(0, b.bands)),
+            ("the whole device", &b.slab, spec(0, 1)),
+        ] {
+            let (found, solid) = SolidMesh::validate_for(mesh, spec);
+            checks.extend(found.into_iter().map(|mut c| {
+                c.detail = format!("{file}: {}", c.detail);
+                c
+            }));
+            solids.push(solid);
+        }
+        let all = match solids[..] {
+            [Some(clear), Some(black), Some(_)] => Some([clear, black]),
+            _ => None,
+        };
+        (checks, all)
+    }
 }
 
 fn printed_base(design: &Design) -> PrintedBase {
@@ -83,35 +118,12 @@ fn printed_base(design: &Design) -> PrintedBase {
 }
 
 /// Builds the clear and black bodies from the checked device mesh and
-/// measures them: each a solid of the expected genus and shells, together
-/// exactly the device, and the duty cycle by volume and along lines.
+/// measures them: together exactly the device, and the duty cycle by
+/// volume and along lines.
 pub fn build_printed(design: &Design, build: &DeviceBuild) -> Result<PrintedBuild> {
     let pb = printed_base(design);
     let bodies = printed_bodies(design, &build.mesh).context("building the printed bodies")?;
     let mut checks = Vec::new();
-    let solid = |genus, shells| SolidSpec {
-        genus,
-        shells,
-        ..SolidSpec::DEVICE
-    };
-    for (file, mesh, spec) in [
-        (
-            "device-clear.stl",
-            &bodies.clear,
-            solid(bodies.clear_genus, 1),
-        ),
-        ("device-black.stl", &bodies.black, solid(0, bodies.bands)),
-        ("the whole device", &bodies.slab, solid(0, 1)),
-    ] {
-        checks.extend(
-            moirecast_kernel::check::solid_checks_for(mesh, spec)
-                .into_iter()
-                .map(|mut c| {
-                    c.detail = format!("{file}: {}", c.detail);
-                    c
-                }),
-        );
-    }
     let (clear, black, slab) = (
         bodies.clear.volume(),
         bodies.black.volume(),
@@ -163,25 +175,14 @@ pub(crate) fn write_printed_device(
 ) -> Result<DeviceOutcome> {
     progress.stage("printed bodies", 1);
     let printed = build_printed(&spec.design, build)?;
+    let (solid_checks, solids) = printed.solids();
+    checks.extend(solid_checks);
     checks.extend(printed.checks.iter().cloned());
     refuse_failed(&checks)?;
+    let [clear, black] = solids.context("the printed bodies passed their solid checks")?;
     progress.tick(1);
     progress.stage("writing", 1);
     let b = &printed.bodies;
-    let validated = |mesh, genus, shells| {
-        SolidMesh::validate_for(
-            mesh,
-            SolidSpec {
-                genus,
-                shells,
-                ..SolidSpec::DEVICE
-            },
-        )
-        .1
-        .context("the printed bodies passed their solid checks")
-    };
-    let clear = validated(&b.clear, b.clear_genus, 1)?;
-    let black = validated(&b.black, 0, b.bands)?;
     let mut files = OutputSet::new();
     let mut reports = std::collections::BTreeMap::new();
     for (name, solid) in [("device-clear.stl", clear), ("device-black.stl", black)] {

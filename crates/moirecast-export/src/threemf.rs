@@ -5,7 +5,6 @@
 use crate::ExportError;
 use moirecast_kernel::check::SolidMesh;
 use std::fmt::Write as _;
-use std::io::Write as _;
 
 /// A material of a 3MF base-material group.
 #[derive(Clone, Copy, Debug)]
@@ -66,15 +65,23 @@ pub fn model_xml(objects: &[Object]) -> String {
             o.name
         );
         x.push_str(&in_parallel(&mesh.positions, |x, p| {
-            let _ = writeln!(
-                x,
-                "     <vertex x=\"{}\" y=\"{}\" z=\"{}\"/>",
-                p.x as f32, p.y as f32, p.z as f32
-            );
+            let mut f = zmij::Buffer::new();
+            x.push_str("<vertex x=\"");
+            x.push_str(f.format(p.x as f32));
+            x.push_str("\" y=\"");
+            x.push_str(f.format(p.y as f32));
+            x.push_str("\" z=\"");
+            x.push_str(f.format(p.z as f32));
+            x.push_str("\"/>\n");
         }));
         x.push_str("    </vertices>\n    <triangles>\n");
-        x.push_str(&in_parallel(&mesh.triangles, |x, [a, b, c]| {
-            let _ = writeln!(x, "     <triangle v1=\"{a}\" v2=\"{b}\" v3=\"{c}\"/>");
+        x.push_str(&in_parallel(&mesh.triangles, |x, t| {
+            let mut i = itoa::Buffer::new();
+            for (k, v) in t.iter().enumerate() {
+                x.push_str(["<triangle v1=\"", "\" v2=\"", "\" v3=\""][k]);
+                x.push_str(i.format(*v));
+            }
+            x.push_str("\"/>\n");
         }));
         x.push_str("    </triangles>\n   </mesh>\n  </object>\n");
     }
@@ -102,28 +109,116 @@ fn in_parallel<T: Sync>(items: &[T], write: impl Fn(&mut String, &T) + Sync) -> 
     chunks.concat()
 }
 
-/// Encodes `objects` as a 3MF package. Deterministic: fixed entry order
-/// and timestamps.
+/// Encodes `objects` as a 3MF package: a zip with the three parts, the
+/// model deflated in parallel. Deterministic: fixed entry order, fixed
+/// timestamps (1980-01-01, zip's epoch), and chunking by size only.
 pub fn threemf_bytes(file: &str, objects: &[Object]) -> Result<Vec<u8>, ExportError> {
-    let io = |source: std::io::Error| ExportError::Io {
-        path: file.into(),
-        source,
-    };
-    let zip_err = |e: zip::result::ZipError| io(std::io::Error::other(e));
-    let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
-    let options = zip::write::SimpleFileOptions::default()
-        .compression_method(zip::CompressionMethod::Deflated)
-        // level 1: a third bigger than the default, several times faster
-        .compression_level(Some(1))
-        .last_modified_time(zip::DateTime::default())
-        .unix_permissions(0o644);
-    for (name, text) in [
+    let parts = [
         ("[Content_Types].xml", CONTENT_TYPES.to_string()),
         ("_rels/.rels", RELS.to_string()),
         ("3D/3dmodel.model", model_xml(objects)),
-    ] {
-        zip.start_file(name, options).map_err(zip_err)?;
-        zip.write_all(text.as_bytes()).map_err(io)?;
+    ];
+    let mut zip = Vec::new();
+    let mut central = Vec::new();
+    for (name, text) in &parts {
+        let data = text.as_bytes();
+        let (deflated, crc) = deflate_in_parallel(data);
+        let too_big = |n: usize| u32::try_from(n).is_err();
+        if too_big(data.len()) || too_big(zip.len()) {
+            return Err(ExportError::Io {
+                path: file.into(),
+                source: std::io::Error::other("over 4 GB: needs zip64, which is not written"),
+            });
+        }
+        let offset = zip.len() as u32;
+        // the fields local and central headers share, from "version needed" on
+        let mut common = Vec::new();
+        for v in [20u16, 0, 8, 0, DOS_DATE_1980] {
+            common.extend_from_slice(&v.to_le_bytes());
+        }
+        for v in [crc, deflated.len() as u32, data.len() as u32] {
+            common.extend_from_slice(&v.to_le_bytes());
+        }
+        common.extend_from_slice(&(name.len() as u16).to_le_bytes());
+        common.extend_from_slice(&0u16.to_le_bytes()); // extra field length
+        zip.extend_from_slice(&0x0403_4b50u32.to_le_bytes());
+        zip.extend_from_slice(&common);
+        zip.extend_from_slice(name.as_bytes());
+        zip.extend_from_slice(&deflated);
+        central.extend_from_slice(&0x0201_4b50u32.to_le_bytes());
+        central.extend_from_slice(&20u16.to_le_bytes()); // version made by
+        central.extend_from_slice(&common);
+        for v in [0u16, 0, 0] {
+            // comment length, disk, internal attributes
+            central.extend_from_slice(&v.to_le_bytes());
+        }
+        central.extend_from_slice(&0u32.to_le_bytes()); // external attributes
+        central.extend_from_slice(&offset.to_le_bytes());
+        central.extend_from_slice(name.as_bytes());
     }
-    Ok(zip.finish().map_err(zip_err)?.into_inner())
+    let central_offset = zip.len() as u32;
+    zip.extend_from_slice(&central);
+    zip.extend_from_slice(&0x0605_4b50u32.to_le_bytes());
+    for v in [0u16, 0, parts.len() as u16, parts.len() as u16] {
+        zip.extend_from_slice(&v.to_le_bytes());
+    }
+    zip.extend_from_slice(&(central.len() as u32).to_le_bytes());
+    zip.extend_from_slice(&central_offset.to_le_bytes());
+    zip.extend_from_slice(&0u16.to_le_bytes()); // comment length
+    Ok(zip)
+}
+
+/// 1980-01-01 as an MS-DOS date: ((1980 − 1980) << 9) | (1 << 5) | 1.
+const DOS_DATE_1980: u16 = 0x21;
+/// Bytes per independently deflated chunk.
+const CHUNK: usize = 1 << 20;
+
+/// Raw deflate of `data` and its CRC-32, in chunks on all threads (as pigz
+/// does): each chunk is compressed on its own and ends with a sync flush,
+/// the last with the final block, so their concatenation is one valid
+/// deflate stream. Level 1: a third bigger than level 6, several times faster.
+fn deflate_in_parallel(data: &[u8]) -> (Vec<u8>, u32) {
+    use flate2::{Compress, Compression, FlushCompress, Status};
+    use rayon::prelude::*;
+    let chunks = data.len().div_ceil(CHUNK).max(1);
+    let parts: Vec<(Vec<u8>, crc32fast::Hasher)> = (0..chunks)
+        .into_par_iter()
+        .map(|i| {
+            let input = &data[(i * CHUNK).min(data.len())..((i + 1) * CHUNK).min(data.len())];
+            let last = i + 1 == chunks;
+            let flush = if last {
+                FlushCompress::Finish
+            } else {
+                FlushCompress::Sync
+            };
+            let mut z = Compress::new(Compression::new(1), false);
+            let mut out = Vec::with_capacity(input.len() / 3 + 1024);
+            loop {
+                let consumed = z.total_in() as usize;
+                let status = z
+                    .compress_vec(&input[consumed..], &mut out, flush)
+                    .expect("deflate of an in-memory buffer");
+                let all_in = z.total_in() as usize == input.len();
+                let done = if last {
+                    status == Status::StreamEnd
+                } else {
+                    all_in && out.len() < out.capacity()
+                };
+                if done {
+                    break;
+                }
+                out.reserve(out.capacity().max(1024));
+            }
+            let mut crc = crc32fast::Hasher::new();
+            crc.update(input);
+            (out, crc)
+        })
+        .collect();
+    let mut crc = crc32fast::Hasher::new();
+    let mut out = Vec::with_capacity(parts.iter().map(|p| p.0.len()).sum());
+    for (bytes, part) in parts {
+        out.extend_from_slice(&bytes);
+        crc.combine(&part);
+    }
+    (out, crc.finalize())
 }
