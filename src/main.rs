@@ -51,9 +51,8 @@ enum Command {
             default_value = "-10,-7.5,-5,-2.5,0,2.5,5,7.5,10"
         )]
         tilts: Vec<f64>,
-        /// Seed of the sample jitter: the same seed gives the same frames.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
+        #[command(flatten)]
+        view: ViewArgs,
     },
     /// Score the (a, d) design space (METHOD §3) by moiré fidelity, as in
     /// the paper's Fig. 7: a from 0 to 1, d from 0.6 to 1.4 D_s. Writes
@@ -76,9 +75,8 @@ enum Command {
             default_value = "-5,0,5"
         )]
         tilts: Vec<f64>,
-        /// Seed of the sample jitter.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
+        #[command(flatten)]
+        view: ViewArgs,
     },
     /// Build the device and its two-piece casting mold: DIR/device.stl,
     /// DIR/mold-top.stl, DIR/mold-bottom.stl, DIR/assembly.scad and DIR/report.json.
@@ -98,13 +96,26 @@ enum MesherArg {
     Brep,
 }
 
+/// What `render` and `explore` share, with the same defaults.
+#[derive(clap::Args)]
+struct ViewArgs {
+    /// Tilt about the x axis (the other axis: the lens axes tip towards
+    /// or away from the viewer), degrees, the same for every frame.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    tilt_along: f64,
+    /// Seed of the sample jitter: the same seed gives the same frames.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
 /// The view options, refused when out of range before anything is built.
 fn view_options(
     size: usize,
     samples: usize,
     tilts: Vec<f64>,
-    seed: u64,
+    view: ViewArgs,
 ) -> Result<moirecast::render::RenderOptions> {
+    let ViewArgs { tilt_along, seed } = view;
     if size == 0 || size > 4096 || samples == 0 || samples > 16 || tilts.is_empty() {
         anyhow::bail!(
             "--size must be 1..=4096 (got {size}), --samples 1..=16 (got {samples}), and --tilts must name at least one angle"
@@ -113,10 +124,14 @@ fn view_options(
     if let Some(t) = tilts.iter().find(|t| !t.is_finite() || t.abs() >= 60.0) {
         anyhow::bail!("--tilts: {t} is not a tilt in (-60, 60) degrees");
     }
+    if !tilt_along.is_finite() || tilt_along.abs() >= 60.0 {
+        anyhow::bail!("--tilt-along: {tilt_along} is not a tilt in (-60, 60) degrees");
+    }
     Ok(moirecast::render::RenderOptions {
         size,
         samples,
         tilts_deg: tilts,
+        tilt_along_deg: tilt_along,
         seed,
     })
 }
@@ -297,9 +312,9 @@ fn run(cli: Cli) -> Result<()> {
             size,
             samples,
             tilts,
-            seed,
+            view,
         } => {
-            let options = view_options(size, samples, tilts, seed)?;
+            let options = view_options(size, samples, tilts, view)?;
             let (bars, started, spec) = start(&run)?;
             let result = moirecast::render::run_render(&spec, &run.out, &options, &bars);
             bars.done();
@@ -316,9 +331,9 @@ fn run(cli: Cli) -> Result<()> {
             size,
             samples,
             tilts,
-            seed,
+            view,
         } => {
-            let options = view_options(size, samples, tilts, seed)?;
+            let options = view_options(size, samples, tilts, view)?;
             let (bars, started, spec) = start(&run)?;
             let result = moirecast::explore::run_explore(&spec, &run.out, &options, &bars);
             bars.done();

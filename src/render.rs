@@ -25,6 +25,8 @@ pub struct RenderOptions {
     pub samples: usize,
     /// Tilts about the lens axis (degrees), one frame each.
     pub tilts_deg: Vec<f64>,
+    /// Tilt about the x axis (degrees), the same for every frame.
+    pub tilt_along_deg: f64,
     pub seed: u64,
 }
 
@@ -36,7 +38,7 @@ impl RenderOptions {
             height: self.size,
             samples: self.samples,
             tilt_across: tilt_deg.to_radians(),
-            tilt_along: 0.0,
+            tilt_along: self.tilt_along_deg.to_radians(),
             seed: self.seed,
         }
     }
@@ -58,6 +60,8 @@ struct RenderReport {
     samples_per_pixel: usize,
     seed: u64,
     pixels_per_period: f64,
+    /// Tilt about the x axis of every frame (degrees).
+    tilt_along_deg: f64,
     light: &'static str,
     frames: Vec<FrameReport>,
     best_frame: usize,
@@ -157,6 +161,7 @@ pub fn run_render(
         samples_per_pixel: options.samples * options.samples,
         seed: options.seed,
         pixels_per_period: period_px,
+        tilt_along_deg: options.tilt_along_deg,
         light: match design.params.base.kind {
             moirecast_kernel::BaseKind::DualLens => "orthographic view; lateral area light below the device, lit towards +x (soft edge ±0.15 in direction x)",
             moirecast_kernel::BaseKind::Printed(_) => "orthographic view; diffuse backlight below the device; black bands absorb",

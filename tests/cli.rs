@@ -299,9 +299,27 @@ fn render_writes_frames_sheet_gif_and_fidelity_deterministically() {
     assert!(std::fs::read(out_a.join("tilt.gif"))
         .unwrap()
         .starts_with(b"GIF89a"));
+    assert_eq!(report["tilt_along_deg"], 0.0);
+    // tilted about the other axis too: reported, and a different view
+    let mut along = args.to_vec();
+    along.push("--tilt-along=-8");
+    let (ok, err, out_c) = run_with(&along, SMALL, &scratch("render-along"));
+    assert!(ok, "{err}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_c.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["tilt_along_deg"], -8.0);
+    assert!(
+        std::fs::read(out_c.join("frame-01.png")).unwrap()
+            != std::fs::read(out_a.join("frame-01.png")).unwrap()
+    );
     // a bad option is refused before anything is built
-    let (ok, err, out) = run_with(&["render", "--tilts=75"], SMALL, &scratch("render-bad"));
-    assert!(!ok && err.contains("--tilts") && !out.exists(), "{err}");
+    for bad in ["--tilts=75", "--tilt-along=90"] {
+        let (ok, err, out) = run_with(&["render", bad], SMALL, &scratch("render-bad"));
+        assert!(
+            !ok && err.contains(&bad[..bad.find('=').unwrap()]) && !out.exists(),
+            "{err}"
+        );
+    }
 }
 
 /// `moirecast explore`: 5 × 5 cells of (a, d), each scored, the best one
