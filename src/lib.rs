@@ -126,6 +126,28 @@ pub struct DeviceOutcome {
     pub worst_surface_error_mm: f64,
 }
 
+impl DeviceOutcome {
+    fn new(
+        written: Vec<PathBuf>,
+        triangles: usize,
+        volume_mm3: f64,
+        bytes: usize,
+        checks: &[CheckResult],
+    ) -> Self {
+        DeviceOutcome {
+            written,
+            triangles,
+            volume_mm3,
+            bytes,
+            checks: checks.len(),
+            worst_surface_error_mm: checks
+                .iter()
+                .find(|c| c.name == "surface-to-mesh")
+                .map_or(f64::NAN, |c| c.value),
+        }
+    }
+}
+
 /// Which path from the exact model to `device.stl`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Mesher {
@@ -211,17 +233,13 @@ pub fn run_device(
     files.add("device.step", step.step.into_bytes());
     let (written, bytes) = commit_with_report(files, &report, out)?;
     progress.tick(1);
-    Ok(DeviceOutcome {
+    Ok(DeviceOutcome::new(
         written,
-        triangles: stl_mesh.triangles.len(),
-        volume_mm3: report.files["device.stl"].volume_mm3,
+        stl_mesh.triangles.len(),
+        report.files["device.stl"].volume_mm3,
         bytes,
-        checks: checks.len(),
-        worst_surface_error_mm: checks
-            .iter()
-            .find(|c| c.name == "surface-to-mesh")
-            .map_or(f64::NAN, |c| c.value),
-    })
+        &checks,
+    ))
 }
 
 /// Area (mm²) of the lens faces of the direct mesh.

@@ -219,15 +219,11 @@ pub(crate) fn write_printed_device(
     );
     let (written, bytes) = commit_with_report(files, &report, out)?;
     progress.tick(1);
-    Ok(DeviceOutcome {
+    Ok(DeviceOutcome::new(
         written,
-        triangles: b.clear.triangles.len() + b.black.triangles.len(),
-        volume_mm3: printed.report.device_volume_mm3,
+        b.clear.triangles.len() + b.black.triangles.len(),
+        printed.report.device_volume_mm3,
         bytes,
-        checks: checks.len(),
-        worst_surface_error_mm: checks
-            .iter()
-            .find(|c| c.name == "surface-to-mesh")
-            .map_or(f64::NAN, |c| c.value),
-    })
+        &checks,
+    ))
 }

@@ -68,3 +68,38 @@ def built(tmp_path_factory):
         return cache[key]
 
     return get
+
+
+def runs_once(tmp_path_factory, command):
+    """`moirecast COMMAND SPEC -o DIR`, each spec run once per session:
+    a function from spec to (output dir, report)."""
+    cache = {}
+
+    def get(spec):
+        if spec.name not in cache:
+            if not BIN.exists():
+                pytest.fail(f"moirecast binary not found at {BIN}; build it with `cargo build --release`")
+            out = tmp_path_factory.mktemp(spec.stem)
+            r = subprocess.run([str(BIN), command, str(spec), "-o", str(out), "--quiet"], capture_output=True, text=True)
+            assert r.returncode == 0, r.stderr
+            cache[spec.name] = (out, json.loads((out / "report.json").read_text()))
+        return cache[spec.name]
+
+    return get
+
+
+def manifold(path):
+    """An STL as a manifold3d solid, welded first; its status must be NoError."""
+    import numpy as np
+
+    m3d = oracle("manifold3d")
+    trimesh = oracle("trimesh")
+    raw = trimesh.load(str(path), process=False)
+    mesh = m3d.Mesh(
+        vert_properties=np.asarray(raw.vertices, dtype=np.float32),
+        tri_verts=np.asarray(raw.faces, dtype=np.uint32),
+    )
+    mesh.merge()  # STL repeats vertices per facet: weld before loading
+    solid = m3d.Manifold(mesh)
+    assert solid.status() == m3d.Error.NoError, (path.name, solid.status())
+    return solid

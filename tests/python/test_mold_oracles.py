@@ -8,7 +8,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import BIN, ROOT, SPECS, oracle, tool
+from conftest import BIN, ROOT, SPECS, manifold, oracle, runs_once, tool
 
 # Every shipped cast design (3-5 s each to build; see the README). Printed
 # designs are printed, not cast: tests/cli.rs checks that mold refuses them.
@@ -20,31 +20,7 @@ OVERLAP_MM3 = 1e-4
 
 @pytest.fixture(scope="session")
 def molds(tmp_path_factory):
-    cache = {}
-
-    def get(spec):
-        if spec.name not in cache:
-            out = tmp_path_factory.mktemp(spec.stem)
-            r = subprocess.run([str(BIN), "mold", str(spec), "-o", str(out), "--quiet"], capture_output=True, text=True)
-            assert r.returncode == 0, r.stderr
-            cache[spec.name] = (out, json.loads((out / "report.json").read_text()))
-        return cache[spec.name]
-
-    return get
-
-
-def manifold(path):
-    m3d = oracle("manifold3d")
-    trimesh = oracle("trimesh")
-    raw = trimesh.load(str(path), process=False)
-    mesh = m3d.Mesh(
-        vert_properties=np.asarray(raw.vertices, dtype=np.float32),
-        tri_verts=np.asarray(raw.faces, dtype=np.uint32),
-    )
-    mesh.merge()  # STL repeats vertices per facet: weld before loading
-    solid = m3d.Manifold(mesh)
-    assert solid.status() == m3d.Error.NoError, (path.name, solid.status())
-    return solid
+    return runs_once(tmp_path_factory, "mold")
 
 
 @pytest.mark.parametrize("spec", MOLD_SPECS, ids=IDS)

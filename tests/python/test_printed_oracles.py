@@ -4,7 +4,7 @@ the 3MF Consortium's lib3mf on device.3mf."""
 import numpy as np
 import pytest
 
-from conftest import PRINTED_SPECS, oracle
+from conftest import PRINTED_SPECS, manifold, oracle, runs_once
 
 IDS = [s.stem for s in PRINTED_SPECS]
 BODIES = ["device-clear.stl", "device-black.stl"]
@@ -13,36 +13,7 @@ BODIES = ["device-clear.stl", "device-black.stl"]
 @pytest.fixture(scope="session")
 def printed(tmp_path_factory):
     """Each printed spec built once: (output dir, report)."""
-    import json
-    import subprocess
-
-    from conftest import BIN
-
-    cache = {}
-
-    def get(spec):
-        if spec.name not in cache:
-            out = tmp_path_factory.mktemp(spec.stem)
-            r = subprocess.run([str(BIN), "device", str(spec), "-o", str(out), "--quiet"], capture_output=True, text=True)
-            assert r.returncode == 0, r.stderr
-            cache[spec.name] = (out, json.loads((out / "report.json").read_text()))
-        return cache[spec.name]
-
-    return get
-
-
-def manifold(path):
-    m3d = oracle("manifold3d")
-    trimesh = oracle("trimesh")
-    raw = trimesh.load(str(path), process=False)
-    mesh = m3d.Mesh(
-        vert_properties=np.asarray(raw.vertices, dtype=np.float32),
-        tri_verts=np.asarray(raw.faces, dtype=np.uint32),
-    )
-    mesh.merge()  # STL repeats vertices per facet: weld before loading
-    solid = m3d.Manifold(mesh)
-    assert solid.status() == m3d.Error.NoError, (path.name, solid.status())
-    return solid
+    return runs_once(tmp_path_factory, "device")
 
 
 def test_a_printed_example_ships():
