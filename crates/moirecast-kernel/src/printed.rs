@@ -165,6 +165,38 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
         .filter_map(|(ti, t)| band_of(ti).map(|black| (*t, black)))
         .collect();
     let on_s = EdgeMap::new(pos.len(), &s_tris);
+    // A band edge that touches a wall tangentially (the mesher takes a
+    // crease within `WALL_SNAP_MM` of a wall as lying on it) would pinch the
+    // clear body to a line there: two band sides and two wall faces on one
+    // vertical edge. Such a wall vertex has two band-edge segments.
+    let mut on_outline = vec![false; pos.len()];
+    let mut band_edges_at = vec![0u8; pos.len()];
+    for (t, black) in &s_tris {
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            match on_s.get(b, a) {
+                None => {
+                    on_outline[a as usize] = true;
+                    on_outline[b as usize] = true;
+                }
+                Some(other) if *black && !other => {
+                    band_edges_at[a as usize] += 1;
+                    band_edges_at[b as usize] += 1;
+                }
+                Some(_) => {}
+            }
+        }
+    }
+    if let Some(v) = (0..pos.len()).find(|&v| on_outline[v] && band_edges_at[v] >= 2) {
+        let p = pos[v];
+        return Err(KernelError::MeshCheck {
+            name: "band-touches-wall",
+            detail: format!(
+                "a band edge touches the side wall at ({:.4}, {:.4}) mm without crossing it, which would pinch the clear body to a line; change the width, the levels or the blur slightly",
+                p.x, p.y
+            ),
+        });
+    }
     let mut clear = Body::new(pos, &pb);
     let mut clear_on_band: Vec<bool> = Vec::new();
     let mut black = Body::new(pos, &pb);

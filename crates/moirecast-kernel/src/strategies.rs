@@ -101,3 +101,19 @@ prop_compose! {
         Design::new(p).ok()
     }
 }
+
+prop_compose! {
+    /// A random valid printed design (METHOD §5.2): a [`design_strategy`]
+    /// draw with black bands instead of base lenses, any duty cycle and
+    /// layer thicknesses.
+    pub fn printed_design_strategy()(
+        design in design_strategy(),
+        duty in 0.1..0.9f64,
+        band_thickness in 0.05..0.5f64,
+        backing in 0.1..2.0f64,
+    ) -> Option<Design> {
+        let mut p = design?.params;
+        p.base.kind = BaseKind::Printed(PrintedBase { duty, band_thickness, backing });
+        Design::new(p).ok()
+    }
+}

@@ -5,7 +5,9 @@ use moirecast_kernel::check::{solid_checks_for, SolidSpec};
 use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::printed::{duty_along_lines, printed_bodies};
 use moirecast_kernel::progress::Silent;
+use moirecast_kernel::strategies::printed_design_strategy;
 use moirecast_kernel::*;
+use proptest::prelude::*;
 
 fn printed(surface: PitchSurface, profile: Profile, duty: f64) -> Design {
     let mut p = DesignParams::with_defaults(surface, 12.0, 8.0, 0.5);
@@ -17,7 +19,11 @@ fn printed(surface: PitchSurface, profile: Profile, duty: f64) -> Design {
     Design::new(p).unwrap()
 }
 
-fn assert_printed_invariants(d: &Design) {
+/// Every invariant of a printed device, measured on every vertex and lens
+/// triangle; with `duty_within`, the duty cycle along lines too (it departs
+/// from `duty` where the elevation bends within a period, so random steep
+/// designs skip it).
+fn assert_printed_invariants(d: &Design, duty_within: Option<f64>) {
     let dm = mesh_device(d, &Silent).unwrap();
     let checks = [
         measure::vertex_on_surface(d, &dm, 1),
@@ -58,7 +64,9 @@ fn assert_printed_invariants(d: &Design) {
         b.black_area / b.layer_area,
         lines
     );
-    assert!((lines.duty - pb.duty).abs() <= 0.01 * pb.duty, "{lines:?}");
+    if let Some(share) = duty_within {
+        assert!((lines.duty - pb.duty).abs() <= share * pb.duty, "{lines:?}");
+    }
 }
 
 /// Known answer: on a plane with no shift, band m spans x from
@@ -67,7 +75,7 @@ fn assert_printed_invariants(d: &Design) {
 fn a_plane_device_has_exact_bands() {
     let duty = 0.4;
     let d = printed(PitchSurface::Plane, Profile::Flat, duty);
-    assert_printed_invariants(&d);
+    assert_printed_invariants(&d, Some(1e-9));
     let dm = mesh_device(&d, &Silent).unwrap();
     let b = printed_bodies(&d, &dm).unwrap();
     let (xl, t) = (d.outline_x.0, d.params.period);
@@ -92,6 +100,27 @@ fn a_saddle_with_rings_keeps_every_invariant() {
             Profile::Rings { wavelength: 5.0 },
             duty,
         );
-        assert_printed_invariants(&d);
+        assert_printed_invariants(&d, Some(0.01));
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+
+    /// Random printed designs: every surface and profile kind, any duty
+    /// cycle and layer thickness; both bodies solid, of the expected genus
+    /// and shells, filling the device exactly, band edges on their phases.
+    /// A band edge that touches a wall tangentially (a rare coincidence) is
+    /// refused by name instead of pinching the clear body.
+    #[test]
+    fn random_printed_designs_keep_every_invariant(design in printed_design_strategy()) {
+        prop_assume!(design.is_some());
+        let d = design.unwrap();
+        let dm = mesh_device(&d, &Silent).unwrap();
+        if let Err(e) = printed_bodies(&d, &dm) {
+            prop_assert!(e.to_string().contains("band-touches-wall"), "{e}");
+            return Err(TestCaseError::reject("a band touches a wall"));
+        }
+        assert_printed_invariants(&d, None);
     }
 }
