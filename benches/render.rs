@@ -44,6 +44,7 @@ fn main() {
                         samples: 1,
                         tilt_across: 0.0,
                         tilt_along: 0.0,
+                        camera: Default::default(),
                         seed: 1,
                     },
                 );

@@ -103,6 +103,10 @@ struct ViewArgs {
     /// or away from the viewer), degrees, the same for every frame.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     tilt_along: f64,
+    /// A perspective camera with its eye this far (mm) from the device's
+    /// centre; left out, the camera is orthographic.
+    #[arg(long)]
+    camera_distance: Option<f64>,
     /// Seed of the sample jitter: the same seed gives the same frames.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -115,7 +119,14 @@ fn view_options(
     tilts: Vec<f64>,
     view: ViewArgs,
 ) -> Result<moirecast::render::RenderOptions> {
-    let ViewArgs { tilt_along, seed } = view;
+    let ViewArgs {
+        tilt_along,
+        camera_distance,
+        seed,
+    } = view;
+    if let Some(d) = camera_distance.filter(|d| !d.is_finite() || *d <= 0.0) {
+        anyhow::bail!("--camera-distance: {d} is not a distance in mm");
+    }
     if size == 0 || size > 4096 || samples == 0 || samples > 16 || tilts.is_empty() {
         anyhow::bail!(
             "--size must be 1..=4096 (got {size}), --samples 1..=16 (got {samples}), and --tilts must name at least one angle"
@@ -132,6 +143,7 @@ fn view_options(
         samples,
         tilts_deg: tilts,
         tilt_along_deg: tilt_along,
+        camera_distance_mm: camera_distance,
         seed,
     })
 }

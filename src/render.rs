@@ -9,7 +9,7 @@ use moirecast_export::OutputSet;
 use moirecast_kernel::check::SolidMesh;
 use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::Progress;
-use moirecast_render::frame::{render_scored, traced_mesh, View};
+use moirecast_render::frame::{render_scored, traced_mesh, Camera, View};
 use moirecast_render::sheet::{contact_sheet, to_gray, Gray};
 use moirecast_render::Scene;
 use moirecast_spec::Spec;
@@ -27,6 +27,8 @@ pub struct RenderOptions {
     pub tilts_deg: Vec<f64>,
     /// Tilt about the x axis (degrees), the same for every frame.
     pub tilt_along_deg: f64,
+    /// Eye distance (mm) of a perspective camera; `None` is orthographic.
+    pub camera_distance_mm: Option<f64>,
     pub seed: u64,
 }
 
@@ -39,6 +41,10 @@ impl RenderOptions {
             samples: self.samples,
             tilt_across: tilt_deg.to_radians(),
             tilt_along: self.tilt_along_deg.to_radians(),
+            camera: match self.camera_distance_mm {
+                None => Camera::Orthographic,
+                Some(distance) => Camera::Perspective { distance },
+            },
             seed: self.seed,
         }
     }
@@ -62,6 +68,8 @@ struct RenderReport {
     pixels_per_period: f64,
     /// Tilt about the x axis of every frame (degrees).
     tilt_along_deg: f64,
+    /// "orthographic", or the perspective eye's distance from the device's centre.
+    camera: String,
     light: &'static str,
     frames: Vec<FrameReport>,
     best_frame: usize,
@@ -119,6 +127,15 @@ pub fn run_render(
     refuse_failed(&checks)?;
     progress.stage("rendering", options.tilts_deg.len() as u64);
     let (mesh, absorbing) = traced_mesh(design, &dm).context("building the traced bodies")?;
+    let (lo, hi) = mesh.bounds();
+    if let Some(d) = options.camera_distance_mm {
+        let reach = 0.5 * (hi - lo).length();
+        anyhow::ensure!(
+            d > reach,
+            "--camera-distance {d} mm puts the eye inside the device's bounding sphere ({reach:.1} mm around its centre); use more than {:.0} mm",
+            reach.ceil()
+        );
+    }
     let scene = Scene::with_absorbing(&mesh, absorbing);
     let mut files = OutputSet::new();
     let (mut grays, mut reports) = (Vec::new(), Vec::new());
@@ -162,6 +179,10 @@ pub fn run_render(
         seed: options.seed,
         pixels_per_period: period_px,
         tilt_along_deg: options.tilt_along_deg,
+        camera: match options.camera_distance_mm {
+            None => "orthographic".into(),
+            Some(d) => format!("perspective, eye {d} mm from the device's centre"),
+        },
         light: match design.params.base.kind {
             moirecast_kernel::BaseKind::DualLens => "orthographic view; lateral area light below the device, lit towards +x (soft edge ±0.15 in direction x)",
             moirecast_kernel::BaseKind::Printed(_) => "orthographic view; diffuse backlight below the device; black bands absorb",

@@ -303,17 +303,22 @@ fn render_writes_frames_sheet_gif_and_fidelity_deterministically() {
     // tilted about the other axis too: reported, and a different view
     let mut along = args.to_vec();
     along.push("--tilt-along=-8");
+    along.push("--camera-distance=200");
     let (ok, err, out_c) = run_with(&along, SMALL, &scratch("render-along"));
     assert!(ok, "{err}");
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out_c.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["tilt_along_deg"], -8.0);
+    assert!(report["camera"]
+        .as_str()
+        .unwrap()
+        .starts_with("perspective, eye 200 mm"));
     assert!(
         std::fs::read(out_c.join("frame-01.png")).unwrap()
             != std::fs::read(out_a.join("frame-01.png")).unwrap()
     );
     // a bad option is refused before anything is built
-    for bad in ["--tilts=75", "--tilt-along=90"] {
+    for bad in ["--tilts=75", "--tilt-along=90", "--camera-distance=-3"] {
         let (ok, err, out) = run_with(&["render", bad], SMALL, &scratch("render-bad"));
         assert!(
             !ok && err.contains(&bad[..bad.find('=').unwrap()]) && !out.exists(),

@@ -21,7 +21,21 @@ pub struct View {
     pub tilt_across: f64,
     /// Tilt about the x axis, radians.
     pub tilt_along: f64,
+    pub camera: Camera,
     pub seed: u64,
+}
+
+/// How rays leave the camera.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub enum Camera {
+    /// Parallel rays: every point of the device seen at the same angle.
+    #[default]
+    Orthographic,
+    /// Rays from an eye `distance` mm from the device's centre, along the
+    /// view direction; the device fills the frame. Points towards the edges
+    /// are seen at angles up to atan(extent / 2 / distance) off the axis,
+    /// as a viewer at that distance sees them.
+    Perspective { distance: f64 },
 }
 
 /// A rendered frame and, per pixel, the elevation phase frac(A·e) of the
@@ -103,6 +117,14 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
     let back = (hi - lo).length() + 1.0;
     let levels = design.params.base.levels;
     let light = light_for(design);
+    // the ray towards the image-plane point `target`
+    let ray = |target: DVec3| match view.camera {
+        Camera::Orthographic => (target - back * dir, dir),
+        Camera::Perspective { distance } => {
+            let eye = centre - distance * dir;
+            (eye, (target - eye).normalize())
+        }
+    };
     let n = view.samples.max(1);
     let pixels: Vec<(f64, f64)> = (0..view.width * view.height)
         .into_par_iter()
@@ -119,14 +141,8 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
                 let target = centre
                     + du * (fx * pixel * view.width as f64)
                     + dv * (fy * pixel * view.height as f64);
-                sum += radiance(
-                    scene,
-                    design.params.lens.index,
-                    target - back * dir,
-                    dir,
-                    &light,
-                    &mut rng,
-                );
+                let (origin, d) = ray(target);
+                sum += radiance(scene, design.params.lens.index, origin, d, &light, &mut rng);
             }
             // the phase at the pixel centre, from where its central ray meets the device
             let fx = (px as f64 + 0.5) / view.width as f64 - 0.5;
@@ -134,10 +150,10 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
             let target = centre
                 + du * (fx * pixel * view.width as f64)
                 + dv * (fy * pixel * view.height as f64);
-            let origin = target - back * dir;
-            let phase = match scene.intersect(origin, dir, 0.0) {
+            let (origin, d) = ray(target);
+            let phase = match scene.intersect(origin, d, 0.0) {
                 Some(hit) if hit.normal.z > 0.0 => {
-                    let q = origin + hit.t * dir;
+                    let q = origin + hit.t * d;
                     let (u, v) = layout_of(design, q.x, q.y);
                     (levels * design.params.profile.value(u, v)).rem_euclid(1.0)
                 }

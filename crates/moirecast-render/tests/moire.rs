@@ -10,7 +10,7 @@ use moirecast_kernel::progress::Silent;
 use moirecast_kernel::{
     BaseKind, Design, DesignParams, PitchSurface, PrintedBase, Profile, ProfileMode,
 };
-use moirecast_render::frame::{render, traced_mesh, Frame, View};
+use moirecast_render::frame::{render, traced_mesh, Camera, Frame, View};
 use moirecast_render::{fidelity, Scene};
 
 const SIZE: f64 = 16.0;
@@ -68,6 +68,7 @@ fn frame(phase_of: &Design, device: &Design, tilt: f64, seed: u64) -> Frame {
             samples: 2,
             tilt_across: tilt.to_radians(),
             tilt_along: 0.0,
+            camera: Camera::Orthographic,
             seed,
         },
     )
@@ -118,6 +119,46 @@ fn a_printed_device_shows_the_rings_against_a_backlight() {
     assert!(unshifted < 0.15, "printed flat {unshifted}");
     // half the base is black: roughly half the backlight comes through
     assert!(mean > 0.2 && mean < 0.8, "mean luminance {mean}");
+}
+
+/// A perspective camera far away sees what the orthographic camera sees;
+/// close up it sees the edges at other angles, so the frame changes.
+#[test]
+fn a_far_perspective_camera_approaches_the_orthographic_one() {
+    let d = rings(1.0, None);
+    let dm = mesh_device(&d, &Silent).unwrap();
+    let scene = Scene::new(&dm.mesh);
+    let view = |camera| View {
+        width: 96,
+        height: 96,
+        samples: 2,
+        tilt_across: 0.0,
+        tilt_along: 0.0,
+        camera,
+        seed: 3,
+    };
+    let score = |f: &Frame| fidelity(&f.luminance, &f.phase, f.width, f.height, f.period_px);
+    let ortho = render(&d, &scene, view(Camera::Orthographic));
+    let far = render(&d, &scene, view(Camera::Perspective { distance: 1e5 }));
+    let near = render(&d, &scene, view(Camera::Perspective { distance: 30.0 }));
+    let differing = |a: &Frame, b: &Frame| {
+        a.luminance
+            .iter()
+            .zip(&b.luminance)
+            .filter(|(x, y)| (*x - *y).abs() > 0.25)
+            .count() as f64
+            / a.luminance.len() as f64
+    };
+    eprintln!(
+        "fidelity ortho {:.3} far {:.3} near {:.3}; pixels differing: far {:.3}, near {:.3}",
+        score(&ortho),
+        score(&far),
+        score(&near),
+        differing(&ortho, &far),
+        differing(&ortho, &near)
+    );
+    assert!((score(&ortho) - score(&far)).abs() < 0.02);
+    assert!(differing(&ortho, &near) > 2.0 * differing(&ortho, &far));
 }
 
 #[test]
