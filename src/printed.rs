@@ -45,6 +45,11 @@ pub struct PrintedReport {
     /// The band layer: the outline's area of s times t_b.
     pub band_layer_volume_mm3: f64,
     pub duty: DutyReport,
+    /// Places where a band edge touched a side wall without crossing it,
+    /// and how far closing each pinch moved the band's outline (mm; at
+    /// most the tolerance).
+    pub wall_touches: usize,
+    pub wall_touch_shift_mm: f64,
 }
 
 /// The duty cycle, asked and measured two ways on the output. These are
@@ -156,6 +161,8 @@ pub fn build_printed(design: &Design, build: &DeviceBuild) -> Result<PrintedBuil
             lines: lines.lines,
             periods: lines.periods,
         },
+        wall_touches: bodies.wall_touches.touches,
+        wall_touch_shift_mm: bodies.wall_touches.max_shift_mm,
     };
     Ok(PrintedBuild {
         bodies,

@@ -39,6 +39,8 @@ pub struct PrintedBodies {
     /// Per triangle of `clear`: it is a face shared with the bands (their
     /// tops, sides or bottoms), where a renderer absorbs.
     pub clear_on_band: Vec<bool>,
+    /// Tangential wall touches of band edges, and their repair.
+    pub wall_touches: WallTouches,
     /// Number of band shells in `black`.
     pub bands: u32,
     /// Through-holes of `clear`: a band whose ends meet the walls in two
@@ -130,6 +132,122 @@ impl<'a> Body<'a> {
     }
 }
 
+/// Where band edges touched a wall without crossing it, and how the bands
+/// were changed there.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WallTouches {
+    /// Wall vertices where a band edge touched the wall tangentially.
+    pub touches: usize,
+    /// Triangles of s given to the other body there.
+    pub triangles_moved: usize,
+    /// Largest distance (mm) from the wall of a moved triangle's vertex:
+    /// how far the band's outline moved. At most the tolerance.
+    pub max_shift_mm: f64,
+}
+
+/// Outline vertices of s where two band-edge segments meet: there a band
+/// edge touches a wall tangentially (the mesher takes a crease within
+/// `WALL_SNAP_MM` of a wall as lying on it), and the region between the
+/// edge and the wall is pinched to a point, which would pinch that body to
+/// a vertical line (four faces on one edge). Rings and images whose
+/// elevation reaches 0 or 1 at the wall do this wherever E is a whole
+/// number of periods there.
+fn pinches(vertices: usize, s_tris: &[([u32; 3], bool)]) -> Vec<u32> {
+    let on_s = EdgeMap::new(vertices, s_tris);
+    let mut on_outline = vec![false; vertices];
+    let mut band_edges_at = vec![0u8; vertices];
+    for (t, black) in s_tris {
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            match on_s.get(b, a) {
+                None => {
+                    on_outline[a as usize] = true;
+                    on_outline[b as usize] = true;
+                }
+                Some(other) if *black && !other => {
+                    band_edges_at[a as usize] += 1;
+                    band_edges_at[b as usize] += 1;
+                }
+                Some(_) => {}
+            }
+        }
+    }
+    (0..vertices as u32)
+        .filter(|&v| on_outline[v as usize] && band_edges_at[v as usize] >= 2)
+        .collect()
+}
+
+/// Repairs every tangential wall touch: the sliver between the band edge
+/// and the wall next to the touch (the triangles at the touching vertex on
+/// the wall's side, which all have the colour of the wall edges there)
+/// goes to the other body, so the band edge meets the wall at the
+/// neighbouring rows instead of touching it at a point. The band outline
+/// moves by the sliver's width, which must stay within the tolerance.
+fn repair_wall_touches(
+    design: &Design,
+    pos: &[DVec3],
+    s_tris: &mut [([u32; 3], bool)],
+) -> Result<WallTouches> {
+    let mut found = WallTouches::default();
+    let touches = pinches(pos.len(), s_tris);
+    if touches.is_empty() {
+        return Ok(found);
+    }
+    let (xl, xr) = design.outline_x;
+    let hh = design.half_height;
+    let wall_distance = |p: DVec3| {
+        (p.x - xl)
+            .abs()
+            .min((p.x - xr).abs())
+            .min((p.y + hh).abs())
+            .min((p.y - hh).abs())
+    };
+    let outline = EdgeMap::new(pos.len(), s_tris);
+    for &v in &touches {
+        // the colour of the wall edges at v: the pinched region's
+        let pinched = s_tris.iter().find_map(|(t, black)| {
+            (0..3).find_map(|e| {
+                let (a, b) = (t[e], t[(e + 1) % 3]);
+                ((a == v || b == v) && outline.get(b, a).is_none()).then_some(*black)
+            })
+        });
+        let Some(pinched) = pinched else { continue };
+        found.touches += 1;
+        for (t, black) in s_tris.iter_mut() {
+            if *black == pinched && t.contains(&v) {
+                *black = !pinched;
+                found.triangles_moved += 1;
+                for &w in t.iter() {
+                    found.max_shift_mm = found.max_shift_mm.max(wall_distance(pos[w as usize]));
+                }
+            }
+        }
+    }
+    let left = pinches(pos.len(), s_tris);
+    if let Some(&v) = left.first() {
+        let p = pos[v as usize];
+        return Err(KernelError::MeshCheck {
+            name: "band-touches-wall",
+            detail: format!(
+                "a band edge touches the side wall at ({:.4}, {:.4}) mm without crossing it, which would pinch a body to a line, and moving the sliver next to it did not help; change the width, the levels or the blur slightly",
+                p.x, p.y
+            ),
+        });
+    }
+    if found.max_shift_mm > design.tolerance.mm() {
+        return Err(KernelError::MeshCheck {
+            name: "band-touches-wall",
+            detail: format!(
+                "a band edge touches a side wall without crossing it at {} places; closing the pinch there moves the band's outline by {:.2} µm, more than the {:.2} µm tolerance; change the width, the levels or the blur slightly",
+                found.touches,
+                found.max_shift_mm * 1e3,
+                design.tolerance.mm() * 1e3
+            ),
+        });
+    }
+    Ok(found)
+}
+
 /// Extends `flags` to every triangle of `body` made so far with `value`.
 fn mark(body: &Body, flags: &mut Vec<bool>, value: bool) {
     flags.resize(body.mesh.triangles.len(), value);
@@ -158,45 +276,17 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
         Patch::Lens(LensRef::Base(k)) => Some(design.is_black_band(k)),
         _ => None,
     };
-    // directed edges of s → black?
-    let s_tris: Vec<([u32; 3], bool)> = tris
-        .iter()
-        .enumerate()
-        .filter_map(|(ti, t)| band_of(ti).map(|black| (*t, black)))
-        .collect();
-    let on_s = EdgeMap::new(pos.len(), &s_tris);
-    // A band edge that touches a wall tangentially (the mesher takes a
-    // crease within `WALL_SNAP_MM` of a wall as lying on it) would pinch the
-    // clear body to a line there: two band sides and two wall faces on one
-    // vertical edge. Such a wall vertex has two band-edge segments.
-    let mut on_outline = vec![false; pos.len()];
-    let mut band_edges_at = vec![0u8; pos.len()];
-    for (t, black) in &s_tris {
-        for e in 0..3 {
-            let (a, b) = (t[e], t[(e + 1) % 3]);
-            match on_s.get(b, a) {
-                None => {
-                    on_outline[a as usize] = true;
-                    on_outline[b as usize] = true;
-                }
-                Some(other) if *black && !other => {
-                    band_edges_at[a as usize] += 1;
-                    band_edges_at[b as usize] += 1;
-                }
-                Some(_) => {}
-            }
+    // s's triangles (device-mesh index) and whether each is black
+    let mut s_tris: Vec<([u32; 3], bool)> = Vec::new();
+    let mut s_index: Vec<usize> = Vec::new();
+    for (ti, t) in tris.iter().enumerate() {
+        if let Some(black) = band_of(ti) {
+            s_tris.push((*t, black));
+            s_index.push(ti);
         }
     }
-    if let Some(v) = (0..pos.len()).find(|&v| on_outline[v] && band_edges_at[v] >= 2) {
-        let p = pos[v];
-        return Err(KernelError::MeshCheck {
-            name: "band-touches-wall",
-            detail: format!(
-                "a band edge touches the side wall at ({:.4}, {:.4}) mm without crossing it, which would pinch the clear body to a line; change the width, the levels or the blur slightly",
-                p.x, p.y
-            ),
-        });
-    }
+    let repair = repair_wall_touches(design, pos, &mut s_tris)?;
+    let on_s = EdgeMap::new(pos.len(), &s_tris);
     let mut clear = Body::new(pos, &pb);
     let mut clear_on_band: Vec<bool> = Vec::new();
     let mut black = Body::new(pos, &pb);
@@ -212,10 +302,8 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
     // per period m: xy area of its band, of all of it, and whether it meets an x-wall
     let mut periods: std::collections::BTreeMap<i64, (f64, f64, bool)> = Default::default();
     let (xl, xr) = design.outline_x;
-    for (ti, t) in tris.iter().enumerate() {
-        let Some(is_black) = band_of(ti) else {
-            continue;
-        };
+    for ((t, is_black), &ti) in s_tris.iter().zip(&s_index) {
+        let is_black = *is_black;
         let area = xy_area(pos, t);
         layer_area += area;
         if let Patch::Lens(LensRef::Base(k)) = dm.patches[ti] {
@@ -275,6 +363,7 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
     Ok(PrintedBodies {
         clear: clear.mesh,
         clear_on_band,
+        wall_touches: repair,
         black: black.mesh,
         slab: slab.mesh,
         bands,

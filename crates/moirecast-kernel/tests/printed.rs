@@ -104,6 +104,24 @@ fn a_saddle_with_rings_keeps_every_invariant() {
     }
 }
 
+/// Rings on a plane whose elevation is 0 or 1 at the walls where E is a
+/// whole number of periods: band edges touch the side walls tangentially.
+/// The sliver at each touch goes to the other body (within tolerance), so
+/// neither body is pinched to a line.
+#[test]
+fn band_edges_that_touch_a_wall_are_repaired_within_tolerance() {
+    let mut p = DesignParams::with_defaults(PitchSurface::Plane, 16.0, 16.0, 0.5);
+    p.profile = Profile::Rings { wavelength: 4.0 };
+    p.base.kind = BaseKind::Printed(PrintedBase::default());
+    let d = Design::new(p).unwrap();
+    let dm = mesh_device(&d, &Silent).unwrap();
+    let touches = printed_bodies(&d, &dm).unwrap().wall_touches;
+    eprintln!("{touches:?}");
+    assert!(touches.touches >= 2, "{touches:?}");
+    assert!(touches.max_shift_mm <= d.tolerance.mm(), "{touches:?}");
+    assert_printed_invariants(&d, Some(0.01));
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
 
