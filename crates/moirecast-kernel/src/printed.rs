@@ -152,8 +152,7 @@ pub struct WallTouches {
 /// a vertical line (four faces on one edge). Rings and images whose
 /// elevation reaches 0 or 1 at the wall do this wherever E is a whole
 /// number of periods there.
-fn pinches(vertices: usize, s_tris: &[([u32; 3], bool)]) -> Vec<u32> {
-    let on_s = EdgeMap::new(vertices, s_tris);
+fn pinches(vertices: usize, s_tris: &[([u32; 3], bool)], on_s: &EdgeMap<bool>) -> Vec<u32> {
     let mut on_outline = vec![false; vertices];
     let mut band_edges_at = vec![0u8; vertices];
     for (t, black) in s_tris {
@@ -183,13 +182,15 @@ fn pinches(vertices: usize, s_tris: &[([u32; 3], bool)]) -> Vec<u32> {
 /// goes to the other body, so the band edge meets the wall at the
 /// neighbouring rows instead of touching it at a point. The band outline
 /// moves by the sliver's width, which must stay within the tolerance.
+/// `on_s` is the edge map of `s_tris`; it is rebuilt here if colours change.
 fn repair_wall_touches(
     design: &Design,
     pos: &[DVec3],
     s_tris: &mut [([u32; 3], bool)],
+    on_s: &mut EdgeMap<bool>,
 ) -> Result<WallTouches> {
     let mut found = WallTouches::default();
-    let touches = pinches(pos.len(), s_tris);
+    let touches = pinches(pos.len(), s_tris, on_s);
     if touches.is_empty() {
         return Ok(found);
     }
@@ -202,13 +203,12 @@ fn repair_wall_touches(
             .min((p.y + hh).abs())
             .min((p.y - hh).abs())
     };
-    let outline = EdgeMap::new(pos.len(), s_tris);
     for &v in &touches {
         // the colour of the wall edges at v: the pinched region's
         let pinched = s_tris.iter().find_map(|(t, black)| {
             (0..3).find_map(|e| {
                 let (a, b) = (t[e], t[(e + 1) % 3]);
-                ((a == v || b == v) && outline.get(b, a).is_none()).then_some(*black)
+                ((a == v || b == v) && on_s.get(b, a).is_none()).then_some(*black)
             })
         });
         let Some(pinched) = pinched else { continue };
@@ -223,7 +223,8 @@ fn repair_wall_touches(
             }
         }
     }
-    let left = pinches(pos.len(), s_tris);
+    *on_s = EdgeMap::new(pos.len(), s_tris);
+    let left = pinches(pos.len(), s_tris, on_s);
     if let Some(&v) = left.first() {
         let p = pos[v as usize];
         return Err(KernelError::MeshCheck {
@@ -285,8 +286,8 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
             s_index.push(ti);
         }
     }
-    let repair = repair_wall_touches(design, pos, &mut s_tris)?;
-    let on_s = EdgeMap::new(pos.len(), &s_tris);
+    let mut on_s = EdgeMap::new(pos.len(), &s_tris);
+    let repair = repair_wall_touches(design, pos, &mut s_tris, &mut on_s)?;
     let mut clear = Body::new(pos, &pb);
     let mut clear_on_band: Vec<bool> = Vec::new();
     let mut black = Body::new(pos, &pb);

@@ -9,6 +9,7 @@ use glam::{DMat3, DVec3};
 use moirecast_kernel::mesher::DeviceMesh;
 use moirecast_kernel::{BaseKind, Design, KernelError, Mesh, PitchSurface};
 use rayon::prelude::*;
+use std::borrow::Cow;
 
 /// How to render one frame.
 #[derive(Clone, Copy, Debug)]
@@ -85,13 +86,20 @@ pub fn light_for(design: &Design) -> fn(DVec3) -> f64 {
 /// What the tracer sees of a device: its mesh and, per triangle, whether it
 /// absorbs. A dual-lens device is its mesh, all dielectric. A printed device
 /// is its clear body, whose faces shared with the black bands absorb (the
-/// black material is opaque): the very clear body that is printed.
-pub fn traced_mesh(design: &Design, dm: &DeviceMesh) -> Result<(Mesh, Vec<bool>), KernelError> {
+/// black material is opaque): the very clear body that is printed. The
+/// dual-lens mesh is borrowed, not copied.
+pub fn traced_mesh<'m>(
+    design: &Design,
+    dm: &'m DeviceMesh,
+) -> Result<(Cow<'m, Mesh>, Vec<bool>), KernelError> {
     match design.params.base.kind {
-        BaseKind::DualLens => Ok((dm.mesh.clone(), vec![false; dm.mesh.triangles.len()])),
+        BaseKind::DualLens => Ok((
+            Cow::Borrowed(&dm.mesh),
+            vec![false; dm.mesh.triangles.len()],
+        )),
         BaseKind::Printed(_) => {
             let bodies = moirecast_kernel::printed::printed_bodies(design, dm)?;
-            Ok((bodies.clear, bodies.clear_on_band))
+            Ok((Cow::Owned(bodies.clear), bodies.clear_on_band))
         }
     }
 }
