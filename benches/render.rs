@@ -6,7 +6,7 @@
 
 use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::Silent;
-use moirecast_render::frame::{render, View};
+use moirecast_render::frame::{render, Lighting, View};
 use moirecast_render::Scene;
 use std::time::Instant;
 
@@ -45,17 +45,12 @@ fn main() {
                         tilt_across: 0.0,
                         tilt_along: 0.0,
                         camera: Default::default(),
+                        lighting: Lighting::default_for(design),
                         seed: 1,
                     },
                 );
                 let e = t.elapsed().as_secs_f64();
-                fid = moirecast_render::fidelity(
-                    &f.luminance,
-                    &f.phase,
-                    f.width,
-                    f.height,
-                    f.period_px,
-                );
+                fid = f.fidelity();
                 e
             })
             .collect();

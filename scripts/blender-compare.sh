@@ -24,7 +24,7 @@ INDEX=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['design'
 for spp in 2 4 8; do
     for seed in 1 2; do
         "$BIN" render "$SPEC" -o "$OUT/ours-$spp-$seed" --size "$SIZE" --samples "$spp" \
-            --tilts="$TILT" --seed "$seed" -v 2> "$OUT/ours-$spp-$seed.log" >/dev/null
+            --tilts="$TILT" --seed "$seed" --lights white -v 2> "$OUT/ours-$spp-$seed.log" >/dev/null
     done
 done
 blender -b --factory-startup -noaudio -P scripts/blender/cycles.py -- \

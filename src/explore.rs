@@ -12,7 +12,7 @@ use moirecast_kernel::progress::{Progress, Silent};
 use moirecast_kernel::Design;
 use moirecast_render::frame::render_scored;
 use moirecast_render::frame::traced_mesh;
-use moirecast_render::sheet::{contact_sheet, to_gray, Gray};
+use moirecast_render::sheet::{contact_sheet, to_rgb8, Rgb8};
 use moirecast_render::Scene;
 use moirecast_spec::Spec;
 use serde::Serialize;
@@ -94,11 +94,12 @@ pub fn run_explore(
     let ds = base.standard.focal_depth;
     progress.stage("exploring (a, d)", (A_VALUES.len() * D_RATIOS.len()) as u64);
     let mut cells = Vec::new();
-    let mut frames: Vec<(Gray, String)> = Vec::new();
-    let blank = Gray {
+    let lighting = options.lights.lighting(base)?;
+    let mut frames: Vec<(Rgb8, String)> = Vec::new();
+    let blank = Rgb8 {
         width: options.size,
         height: options.size,
-        pixels: vec![128; options.size * options.size],
+        pixels: vec![[128; 3]; options.size * options.size],
     };
     for &ratio in &D_RATIOS {
         for &a in &A_VALUES {
@@ -120,18 +121,18 @@ pub fn run_explore(
                 }
                 Ok(design) => {
                     let dm = mesh_device(&design, &Silent).context("meshing a cell")?;
-                    let mut best: Option<(f64, f64, Gray)> = None;
+                    let mut best: Option<(f64, f64, Rgb8)> = None;
                     let (mesh, absorbing) =
                         traced_mesh(&design, &dm).context("building a cell's traced bodies")?;
                     let scene = Scene::with_absorbing(&mesh, absorbing);
                     for &tilt in &options.tilts_deg {
-                        let (f, fid) = render_scored(base, &scene, options.view(tilt));
+                        let (f, fid) = render_scored(base, &scene, options.view(tilt, lighting));
                         if best.as_ref().is_none_or(|b| fid > b.0) {
-                            best = Some((fid, tilt, to_gray(f.width, f.height, &f.luminance)));
+                            best = Some((fid, tilt, to_rgb8(f.width, f.height, &f.rgb)));
                         }
                     }
-                    let (fid, tilt, gray) = best.context("at least one tilt")?;
-                    frames.push((gray, label));
+                    let (fid, tilt, image) = best.context("at least one tilt")?;
+                    frames.push((image, label));
                     Cell {
                         a,
                         d_over_ds: ratio,

@@ -107,6 +107,12 @@ struct ViewArgs {
     /// centre; left out, the camera is orthographic.
     #[arg(long)]
     camera_distance: Option<f64>,
+    /// Light colours: `default` (dual-lens: amber lateral light from +x,
+    /// sky blue from -x; printed: white backlight), `white` (white from +x
+    /// only; white backlight), or #RRGGBB colours: two (+x, -x) for a
+    /// dual-lens device, one for a printed device's backlight.
+    #[arg(long, default_value = "default", value_parser = moirecast::render::LightsChoice::parse)]
+    lights: moirecast::render::LightsChoice,
     /// Seed of the sample jitter: the same seed gives the same frames.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -122,6 +128,7 @@ fn view_options(
     let ViewArgs {
         tilt_along,
         camera_distance,
+        lights,
         seed,
     } = view;
     if let Some(d) = camera_distance.filter(|d| !d.is_finite() || *d <= 0.0) {
@@ -144,6 +151,7 @@ fn view_options(
         tilts_deg: tilts,
         tilt_along_deg: tilt_along,
         camera_distance_mm: camera_distance,
+        lights,
         seed,
     })
 }

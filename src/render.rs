@@ -4,13 +4,15 @@
 
 use crate::{commit_with_report, refuse_failed};
 use anyhow::{Context, Result};
+use glam::DVec3;
 use image::ImageEncoder;
 use moirecast_export::OutputSet;
 use moirecast_kernel::check::SolidMesh;
 use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::Progress;
-use moirecast_render::frame::{render_scored, traced_mesh, Camera, View};
-use moirecast_render::sheet::{contact_sheet, to_gray, Gray};
+use moirecast_kernel::{BaseKind, Design};
+use moirecast_render::frame::{render_scored, traced_mesh, Camera, Lighting, View};
+use moirecast_render::sheet::{contact_sheet, to_rgb8, Rgb8};
 use moirecast_render::Scene;
 use moirecast_spec::Spec;
 use serde::Serialize;
@@ -29,12 +31,85 @@ pub struct RenderOptions {
     pub tilt_along_deg: f64,
     /// Eye distance (mm) of a perspective camera; `None` is orthographic.
     pub camera_distance_mm: Option<f64>,
+    pub lights: LightsChoice,
     pub seed: u64,
 }
 
+/// The lights asked for (`--lights`); [`LightsChoice::lighting`] makes them
+/// a [`Lighting`] for a design.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum LightsChoice {
+    /// The design's default: amber lateral light from +x and sky blue from
+    /// −x (dual-lens), a white backlight (printed).
+    #[default]
+    Default,
+    /// White from +x and none from −x (dual-lens), a white backlight
+    /// (printed): luminance only, as in the Blender comparison.
+    White,
+    /// Colours given: +x and −x for dual-lens lateral lights; one for a
+    /// printed device's backlight.
+    Colours(Vec<DVec3>),
+}
+
+impl LightsChoice {
+    /// Parses `default`, `white`, or comma-separated `#RRGGBB` colours.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        match text.trim() {
+            "default" => Ok(LightsChoice::Default),
+            "white" => Ok(LightsChoice::White),
+            list => list
+                .split(',')
+                .map(|c| {
+                    let hex = c.trim().trim_start_matches('#');
+                    let channel = |i: usize| {
+                        hex.get(i..i + 2)
+                            .and_then(|h| u8::from_str_radix(h, 16).ok())
+                            .map(|v| v as f64 / 255.0)
+                    };
+                    match (hex.len(), channel(0), channel(2), channel(4)) {
+                        (6, Some(r), Some(g), Some(b)) => Ok(DVec3::new(r, g, b)),
+                        _ => Err(format!(
+                            "{c:?} is not a colour: use #RRGGBB (hex), e.g. #FF9926,#2673FF, or `default` or `white`"
+                        )),
+                    }
+                })
+                .collect::<Result<_, _>>()
+                .map(LightsChoice::Colours),
+        }
+    }
+
+    /// The lighting for `design`; colours that do not fit its kind of base
+    /// are refused by name.
+    pub fn lighting(&self, design: &Design) -> Result<Lighting> {
+        let printed = matches!(design.params.base.kind, BaseKind::Printed(_));
+        Ok(match (self, printed) {
+            (LightsChoice::Default, _) => Lighting::default_for(design),
+            (LightsChoice::White, true) => Lighting::Backlight { colour: DVec3::ONE },
+            (LightsChoice::White, false) => Lighting::Lateral {
+                plus_x: DVec3::ONE,
+                minus_x: DVec3::ZERO,
+            },
+            (LightsChoice::Colours(c), true) => match c[..] {
+                [colour] => Lighting::Backlight { colour },
+                _ => anyhow::bail!(
+                    "--lights: a printed device has one backlight; give one colour, not {}",
+                    c.len()
+                ),
+            },
+            (LightsChoice::Colours(c), false) => match c[..] {
+                [plus_x, minus_x] => Lighting::Lateral { plus_x, minus_x },
+                _ => anyhow::bail!(
+                    "--lights: a dual-lens device has two lateral lights; give two colours (+x side, then -x side), not {}",
+                    c.len()
+                ),
+            },
+        })
+    }
+}
+
 impl RenderOptions {
-    /// The view at `tilt_deg` about the lens axis.
-    pub fn view(&self, tilt_deg: f64) -> View {
+    /// The view at `tilt_deg` about the lens axis, in `lighting`.
+    pub fn view(&self, tilt_deg: f64, lighting: Lighting) -> View {
         View {
             width: self.size,
             height: self.size,
@@ -45,6 +120,7 @@ impl RenderOptions {
                 None => Camera::Orthographic,
                 Some(distance) => Camera::Perspective { distance },
             },
+            lighting,
             seed: self.seed,
         }
     }
@@ -55,6 +131,7 @@ struct FrameReport {
     file: String,
     tilt_deg: f64,
     fidelity: f64,
+    /// Mean Rec. 709 luminance of the frame's linear colours.
     mean_luminance: f64,
 }
 
@@ -70,7 +147,7 @@ struct RenderReport {
     tilt_along_deg: f64,
     /// "orthographic", or the perspective eye's distance from the device's centre.
     camera: String,
-    light: &'static str,
+    light: String,
     frames: Vec<FrameReport>,
     best_frame: usize,
     best_fidelity: f64,
@@ -84,24 +161,39 @@ pub struct RenderOutcome {
     pub fidelity: Vec<(f64, f64)>,
 }
 
-pub(crate) fn png(gray: &Gray) -> Result<Vec<u8>> {
+/// PNG bytes of `image`: 8-bit grey where every pixel is grey (a printed
+/// device's white backlight, `--lights white`), RGB otherwise.
+pub(crate) fn png(image: &Rgb8) -> Result<Vec<u8>> {
+    let grey: Option<Vec<u8>> = image
+        .pixels
+        .iter()
+        .map(|&[r, g, b]| (r == g && g == b).then_some(r))
+        .collect();
+    let (bytes_in, colour) = match &grey {
+        Some(grey) => (&grey[..], image::ExtendedColorType::L8),
+        None => (image.bytes(), image::ExtendedColorType::Rgb8),
+    };
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new(&mut bytes).write_image(
-        &gray.pixels,
-        gray.width as u32,
-        gray.height as u32,
-        image::ExtendedColorType::L8,
+        bytes_in,
+        image.width as u32,
+        image.height as u32,
+        colour,
     )?;
     Ok(bytes)
 }
 
-fn gif(frames: &[Gray]) -> Result<Vec<u8>> {
+fn gif(frames: &[Rgb8]) -> Result<Vec<u8>> {
     let mut bytes = Vec::new();
     {
         let mut encoder = image::codecs::gif::GifEncoder::new_with_speed(&mut bytes, 10);
         encoder.set_repeat(image::codecs::gif::Repeat::Infinite)?;
         for g in frames {
-            let rgba: Vec<u8> = g.pixels.iter().flat_map(|&v| [v, v, v, 255]).collect();
+            let rgba: Vec<u8> = g
+                .pixels
+                .iter()
+                .flat_map(|&[r, g, b]| [r, g, b, 255])
+                .collect();
             let buffer = image::RgbaImage::from_raw(g.width as u32, g.height as u32, rgba)
                 .context("frame buffer")?;
             encoder.encode_frame(image::Frame::from_parts(
@@ -122,6 +214,7 @@ pub fn run_render(
     progress: &dyn Progress,
 ) -> Result<RenderOutcome> {
     let design = &spec.design;
+    let lighting = options.lights.lighting(design)?;
     let dm = mesh_device(design, progress).context("meshing the device")?;
     let (checks, _) = SolidMesh::validate(&dm.mesh);
     refuse_failed(&checks)?;
@@ -138,31 +231,31 @@ pub fn run_render(
     }
     let scene = Scene::with_absorbing(&mesh, absorbing);
     let mut files = OutputSet::new();
-    let (mut grays, mut reports) = (Vec::new(), Vec::new());
+    let (mut images, mut reports) = (Vec::new(), Vec::new());
     let mut period_px = 0.0;
     for (i, &tilt) in options.tilts_deg.iter().enumerate() {
-        let (frame, fidelity) = render_scored(design, &scene, options.view(tilt));
+        let (frame, fidelity) = render_scored(design, &scene, options.view(tilt, lighting));
         period_px = frame.period_px;
-        let gray = to_gray(frame.width, frame.height, &frame.luminance);
+        let image = to_rgb8(frame.width, frame.height, &frame.rgb);
         let name = format!("frame-{i:02}.png");
-        files.add(&name, png(&gray)?);
+        files.add(&name, png(&image)?);
         reports.push(FrameReport {
             file: name,
             tilt_deg: tilt,
             fidelity,
-            mean_luminance: frame.luminance.iter().sum::<f64>() / frame.luminance.len() as f64,
+            mean_luminance: frame.mean_luminance(),
         });
-        grays.push(gray);
+        images.push(image);
         progress.tick(1);
     }
-    let labelled: Vec<(Gray, String)> = grays
+    let labelled: Vec<(Rgb8, String)> = images
         .iter()
         .zip(&reports)
         .map(|(g, r)| (g.clone(), format!("{:+.1}°", r.tilt_deg)))
         .collect();
     let columns = (labelled.len() as f64).sqrt().ceil() as usize;
     files.add("sheet.png", png(&contact_sheet(&labelled, columns))?);
-    files.add("tilt.gif", gif(&grays)?);
+    files.add("tilt.gif", gif(&images)?);
     let best = reports.iter().enumerate().fold(0, |b, (i, r)| {
         if r.fidelity > reports[b].fidelity {
             i
@@ -183,10 +276,7 @@ pub fn run_render(
             None => "orthographic".into(),
             Some(d) => format!("perspective, eye {d} mm from the device's centre"),
         },
-        light: match design.params.base.kind {
-            moirecast_kernel::BaseKind::DualLens => "orthographic view; lateral area light below the device, lit towards +x (soft edge ±0.15 in direction x)",
-            moirecast_kernel::BaseKind::Printed(_) => "orthographic view; diffuse backlight below the device; black bands absorb",
-        },
+        light: lighting.describe(),
         best_frame: best,
         best_fidelity: reports.get(best).map_or(0.0, |r| r.fidelity),
         frames: reports,

@@ -317,8 +317,42 @@ fn render_writes_frames_sheet_gif_and_fidelity_deterministically() {
         std::fs::read(out_c.join("frame-01.png")).unwrap()
             != std::fs::read(out_a.join("frame-01.png")).unwrap()
     );
+    // colour: two lateral lights by default, both hues in the frame; the
+    // white light alone gives grey frames, and the report names the lights
+    let rgb = |dir: &std::path::Path| {
+        image::open(dir.join("frame-01.png"))
+            .unwrap()
+            .into_rgb8()
+            .pixels()
+            .map(|p| p.0.map(i32::from))
+            .collect::<Vec<_>>()
+    };
+    let pixels = rgb(&out_a);
+    let warm = pixels.iter().filter(|p| p[0] > p[2] + 60).count();
+    let cool = pixels.iter().filter(|p| p[2] > p[0] + 60).count();
+    assert!(warm > 50 && cool > 50, "warm {warm}, cool {cool} pixels");
+    assert!(report["light"]
+        .as_str()
+        .unwrap()
+        .contains("#FF9926 towards +x, #2673FF towards -x"));
+    let mut white = args.to_vec();
+    white.push("--lights=white");
+    let (ok, err, out_w) = run_with(&white, SMALL, &scratch("render-white"));
+    assert!(ok, "{err}");
+    assert!(rgb(&out_w).iter().all(|p| p[0] == p[1] && p[1] == p[2]));
+    let mut custom = args.to_vec();
+    custom.push("--lights=#00FF00,#FF00FF");
+    let (ok, err, out_g) = run_with(&custom, SMALL, &scratch("render-custom"));
+    assert!(ok, "{err}");
+    assert!(rgb(&out_g).iter().any(|p| p[1] > 200 && p[0] < 50));
     // a bad option is refused before anything is built
-    for bad in ["--tilts=75", "--tilt-along=90", "--camera-distance=-3"] {
+    for bad in [
+        "--tilts=75",
+        "--tilt-along=90",
+        "--camera-distance=-3",
+        "--lights=#12345",
+        "--lights=#FFFFFF",
+    ] {
         let (ok, err, out) = run_with(&["render", bad], SMALL, &scratch("render-bad"));
         assert!(
             !ok && err.contains(&bad[..bad.find('=').unwrap()]) && !out.exists(),

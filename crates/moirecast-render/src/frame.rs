@@ -1,10 +1,11 @@
-//! One frame: an orthographic view of the device, tilted, lit by a lateral
-//! area light below it (the dual-lens moiré selects the direction light
-//! comes from) or, for a printed device, by a diffuse backlight behind its
-//! black bands, with stratified supersampling. Deterministic for a seed.
+//! One frame: an orthographic or perspective view of the device, tilted,
+//! lit by two coloured lateral area lights below it (the dual-lens moiré
+//! selects the direction light comes from, so its level lines take the
+//! lights' colours) or, for a printed device, by a diffuse backlight behind
+//! its black bands, with stratified supersampling. Deterministic for a seed.
 
 use crate::scene::Scene;
-use crate::trace::{radiance, SplitMix64};
+use crate::trace::{trace_path, SplitMix64};
 use glam::{DMat3, DVec3};
 use moirecast_kernel::mesher::DeviceMesh;
 use moirecast_kernel::{BaseKind, Design, KernelError, Mesh, PitchSurface};
@@ -23,6 +24,7 @@ pub struct View {
     /// Tilt about the x axis, radians.
     pub tilt_along: f64,
     pub camera: Camera,
+    pub lighting: Lighting,
     pub seed: u64,
 }
 
@@ -39,47 +41,133 @@ pub enum Camera {
     Perspective { distance: f64 },
 }
 
-/// A rendered frame and, per pixel, the elevation phase frac(A·e) of the
-/// layout point the pixel sees (NaN where it misses the device).
+/// A rendered frame: per pixel its linear RGB colour, the scalar
+/// [`Lighting::signal`] of it that fidelity scores, and the elevation phase
+/// frac(A·e) of the layout point the pixel sees (NaN where it misses the
+/// device's top).
 pub struct Frame {
     pub width: usize,
     pub height: usize,
-    pub luminance: Vec<f64>,
+    /// Linear RGB, row-major; 1 is a light's full radiance in a channel.
+    pub rgb: Vec<DVec3>,
+    /// [`Lighting::signal`] of each pixel's colour.
+    pub signal: Vec<f64>,
     pub phase: Vec<f64>,
     /// Pixels per lens period.
     pub period_px: f64,
 }
 
-/// Half-width (as a direction's x component) of the ramp between dark and
-/// lit: the area light fills the directions with x > 0 below the device.
-const LIGHT_EDGE: f64 = 0.15;
-
-/// The lateral light: directions leaving the device downwards and towards
-/// +x are lit, those towards −x dark, with a soft edge; nothing above.
-pub fn lateral_light(d: DVec3) -> f64 {
-    if d.z >= 0.0 {
-        return 0.0;
+impl Frame {
+    /// Mean Rec. 709 luminance of the linear colours.
+    pub fn mean_luminance(&self) -> f64 {
+        self.rgb.iter().map(|&c| luminance(c)).sum::<f64>() / self.rgb.len().max(1) as f64
     }
-    (0.5 + 0.5 * d.x / LIGHT_EDGE).clamp(0.0, 1.0)
-}
 
-/// The diffuse backlight of a printed device (METHOD §8): every direction
-/// leaving the device downwards reaches it; nothing is lit above.
-pub fn backlight(d: DVec3) -> f64 {
-    if d.z < 0.0 {
-        1.0
-    } else {
-        0.0
+    /// The frame's [`crate::fidelity`].
+    pub fn fidelity(&self) -> f64 {
+        crate::fidelity(
+            &self.signal,
+            &self.phase,
+            self.width,
+            self.height,
+            self.period_px,
+        )
     }
 }
 
-/// The light a design is seen in: a backlight behind a printed device's
-/// bands, the lateral light for a dual-lens device, whose moiré selects the
-/// direction light comes from.
-pub fn light_for(design: &Design) -> fn(DVec3) -> f64 {
-    match design.params.base.kind {
-        BaseKind::Printed(_) => backlight,
-        BaseKind::DualLens => lateral_light,
+/// Rec. 709 luminance of a linear RGB colour.
+pub fn luminance(c: DVec3) -> f64 {
+    c.dot(DVec3::new(0.2126, 0.7152, 0.0722))
+}
+
+/// Half-width (as a direction's x component) of the ramp between the two
+/// lateral lights: each fills the directions below the device on its side.
+pub const LIGHT_EDGE: f64 = 0.15;
+
+/// Warm light from the +x side of the default dual-lens lighting.
+pub const AMBER: DVec3 = DVec3::new(1.0, 0.6, 0.15);
+/// Cool light from the −x side of the default dual-lens lighting.
+pub const SKY_BLUE: DVec3 = DVec3::new(0.15, 0.45, 1.0);
+
+/// The light a device is seen in (METHOD §8). Only the direction a path
+/// leaves the device in matters: the lights are infinitely far.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Lighting {
+    /// A printed device's diffuse backlight: every direction leaving
+    /// downwards sees `colour`; nothing is lit above.
+    Backlight { colour: DVec3 },
+    /// The paper's lateral area lights, below a dual-lens device, one on
+    /// each side: directions leaving downwards towards +x see `plus_x`,
+    /// towards −x `minus_x`, blended over ±[`LIGHT_EDGE`] in direction x;
+    /// nothing is lit above. The dual-lens moiré selects the direction light
+    /// comes from, so its level lines take the two lights' colours.
+    Lateral { plus_x: DVec3, minus_x: DVec3 },
+}
+
+impl Lighting {
+    /// The default for a design: a white backlight behind a printed
+    /// device's bands; amber from +x and sky blue from −x for a dual-lens one.
+    pub fn default_for(design: &Design) -> Self {
+        match design.params.base.kind {
+            BaseKind::Printed(_) => Lighting::Backlight { colour: DVec3::ONE },
+            BaseKind::DualLens => Lighting::Lateral {
+                plus_x: AMBER,
+                minus_x: SKY_BLUE,
+            },
+        }
+    }
+
+    /// The colour seen along a path that leaves the device in direction `d`.
+    pub fn colour(&self, d: DVec3) -> DVec3 {
+        if d.z >= 0.0 {
+            return DVec3::ZERO;
+        }
+        match *self {
+            Lighting::Backlight { colour } => colour,
+            Lighting::Lateral { plus_x, minus_x } => {
+                let w = (0.5 + 0.5 * d.x / LIGHT_EDGE).clamp(0.0, 1.0);
+                w * plus_x + (1.0 - w) * minus_x
+            }
+        }
+    }
+
+    /// The scalar whose level lines fidelity scores. Under two lateral
+    /// lights of different colours it is where the colour lies on the line
+    /// from the −x light's colour (0) to the +x light's (1): the share of
+    /// light from +x, whatever the colours. Otherwise it is the luminance,
+    /// relative to the light's. Linear in the colour, so the signal of a
+    /// pixel's mean colour is the mean of its samples' signals.
+    pub fn signal(&self, rgb: DVec3) -> f64 {
+        match *self {
+            Lighting::Lateral { plus_x, minus_x } if plus_x.distance_squared(minus_x) > 1e-12 => {
+                let axis = plus_x - minus_x;
+                (rgb - minus_x).dot(axis) / axis.length_squared()
+            }
+            Lighting::Lateral { plus_x: c, .. } | Lighting::Backlight { colour: c } => {
+                luminance(rgb) / luminance(c).max(1e-12)
+            }
+        }
+    }
+
+    /// What the lighting is, for reports.
+    pub fn describe(&self) -> String {
+        let hex = |c: DVec3| {
+            let [r, g, b] = c
+                .to_array()
+                .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8);
+            format!("#{r:02X}{g:02X}{b:02X}")
+        };
+        match *self {
+            Lighting::Backlight { colour } => format!(
+                "diffuse backlight {} below the device; black bands absorb",
+                hex(colour)
+            ),
+            Lighting::Lateral { plus_x, minus_x } => format!(
+                "lateral area lights below the device: {} towards +x, {} towards -x (soft edge ±{LIGHT_EDGE} in direction x)",
+                hex(plus_x),
+                hex(minus_x)
+            ),
+        }
     }
 }
 
@@ -112,6 +200,10 @@ fn layout_of(design: &Design, x: f64, y: f64) -> (f64, f64) {
     }
 }
 
+/// Pixels per side of the square tiles a frame is traced in: neighbouring
+/// rays walk the same part of the BVH, so tiles keep it in cache.
+const TILE: usize = 8;
+
 /// One frame of `scene` (the device's mesh, built once and shared by every
 /// frame of it); `design` gives the index and the elevation phase.
 pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
@@ -124,7 +216,7 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
     let pixel = extent / view.width.max(view.height) as f64;
     let back = (hi - lo).length() + 1.0;
     let levels = design.params.base.levels;
-    let light = light_for(design);
+    let lighting = view.lighting;
     // the ray towards the image-plane point `target`
     let ray = |target: DVec3| match view.camera {
         Camera::Orthographic => (target - back * dir, dir),
@@ -134,47 +226,55 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
         }
     };
     let n = view.samples.max(1);
-    let pixels: Vec<(f64, f64)> = (0..view.width * view.height)
+    // the stratum whose sample gives the pixel its phase: the central one
+    let central = (n / 2) * n + n / 2;
+    let (width, height) = (view.width, view.height);
+    let tiles_x = width.div_ceil(TILE);
+    let tiles = tiles_x * height.div_ceil(TILE);
+    let traced: Vec<(usize, DVec3, f64)> = (0..tiles * TILE * TILE)
         .into_par_iter()
-        .map(|p| {
-            let (px, py) = (p % view.width, p / view.width);
+        .filter_map(|i| {
+            let (tile, k) = (i / (TILE * TILE), i % (TILE * TILE));
+            let px = (tile % tiles_x) * TILE + k % TILE;
+            let py = (tile / tiles_x) * TILE + k / TILE;
+            (px < width && py < height).then_some((px, py))
+        })
+        .map(|(px, py)| {
+            let p = py * width + px;
             let mut rng = SplitMix64(view.seed ^ (p as u64).wrapping_mul(0x2545_F491_4F6C_DD1D));
-            let mut sum = 0.0;
+            let (mut sum, mut phase) = (DVec3::ZERO, f64::NAN);
             for s in 0..n * n {
                 let (sx, sy) = (s % n, s / n);
-                let fx =
-                    (px as f64 + (sx as f64 + rng.next_f64()) / n as f64) / view.width as f64 - 0.5;
-                let fy = 0.5
-                    - (py as f64 + (sy as f64 + rng.next_f64()) / n as f64) / view.height as f64;
-                let target = centre
-                    + du * (fx * pixel * view.width as f64)
-                    + dv * (fy * pixel * view.height as f64);
+                let fx = (px as f64 + (sx as f64 + rng.next_f64()) / n as f64) / width as f64 - 0.5;
+                let fy =
+                    0.5 - (py as f64 + (sy as f64 + rng.next_f64()) / n as f64) / height as f64;
+                let target =
+                    centre + du * (fx * pixel * width as f64) + dv * (fy * pixel * height as f64);
                 let (origin, d) = ray(target);
-                sum += radiance(scene, design.params.lens.index, origin, d, &light, &mut rng);
-            }
-            // the phase at the pixel centre, from where its central ray meets the device
-            let fx = (px as f64 + 0.5) / view.width as f64 - 0.5;
-            let fy = 0.5 - (py as f64 + 0.5) / view.height as f64;
-            let target = centre
-                + du * (fx * pixel * view.width as f64)
-                + dv * (fy * pixel * view.height as f64);
-            let (origin, d) = ray(target);
-            let phase = match scene.intersect(origin, d, 0.0) {
-                Some(hit) if hit.normal.z > 0.0 => {
-                    let q = origin + hit.t * d;
-                    let (u, v) = layout_of(design, q.x, q.y);
-                    (levels * design.params.profile.value(u, v)).rem_euclid(1.0)
+                let end = trace_path(scene, design.params.lens.index, origin, d, &mut rng);
+                sum += end.leaves.map_or(DVec3::ZERO, |l| lighting.colour(l));
+                if s == central {
+                    // the layout point this sample sees first, if on the device's top
+                    if let Some((q, _)) = end.first.filter(|(_, nrm)| nrm.z > 0.0) {
+                        let (u, v) = layout_of(design, q.x, q.y);
+                        phase = (levels * design.params.profile.value(u, v)).rem_euclid(1.0);
+                    }
                 }
-                _ => f64::NAN,
-            };
-            (sum / (n * n) as f64, phase)
+            }
+            (p, sum / (n * n) as f64, phase)
         })
         .collect();
-    let (luminance, phase) = pixels.into_iter().unzip();
+    let mut rgb = vec![DVec3::ZERO; width * height];
+    let mut phase = vec![f64::NAN; width * height];
+    for (p, c, ph) in traced {
+        rgb[p] = c;
+        phase[p] = ph;
+    }
     Frame {
-        width: view.width,
-        height: view.height,
-        luminance,
+        width,
+        height,
+        signal: rgb.iter().map(|&c| lighting.signal(c)).collect(),
+        rgb,
         phase,
         period_px: design.params.period / pixel,
     }
@@ -183,12 +283,6 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
 /// [`render`] and the frame's [`crate::fidelity`].
 pub fn render_scored(design: &Design, scene: &Scene, view: View) -> (Frame, f64) {
     let frame = render(design, scene, view);
-    let fidelity = crate::fidelity(
-        &frame.luminance,
-        &frame.phase,
-        frame.width,
-        frame.height,
-        frame.period_px,
-    );
+    let fidelity = frame.fidelity();
     (frame, fidelity)
 }

@@ -3,7 +3,7 @@
 //! a watertight test (Woop, Benthin and Wald, JCGT 2013), so rays do not
 //! leak between the triangles of a closed lens surface.
 
-use glam::{DVec3, Vec3A};
+use glam::{DMat3, DVec3, Vec3A};
 use moirecast_kernel::Mesh;
 use obvhs::cwbvh::{builder::build_cwbvh_from_tris, CwBvh};
 use obvhs::ray::{Ray, RayHit};
@@ -43,6 +43,9 @@ pub struct Hit {
 pub struct Scene<'m> {
     mesh: &'m Mesh,
     bvh: CwBvh,
+    /// The corners of each BVH primitive, in the BVH's leaf order: a leaf's
+    /// triangles are read from one stretch of memory, not gathered.
+    corners: Vec<[DVec3; 3]>,
     /// Per triangle: it absorbs every ray that reaches it (a printed
     /// device's black bands). Empty: every face is a dielectric interface.
     absorbing: Vec<bool>,
@@ -94,9 +97,15 @@ impl<'m> Scene<'m> {
                 "the BVH is {d} levels deep; obvhs traverses at most {MAX_BVH_DEPTH}"
             );
         }
+        let corners = bvh
+            .primitive_indices
+            .iter()
+            .map(|&t| mesh.triangles[t as usize].map(|i| mesh.positions[i as usize]))
+            .collect();
         Scene {
             mesh,
             bvh,
+            corners,
             absorbing: Vec::new(),
         }
     }
@@ -120,10 +129,11 @@ impl<'m> Scene<'m> {
         );
         let mut hit = RayHit::none();
         let mut best = (f64::INFINITY, u32::MAX);
+        let sheared = ShearedRay::new(origin, dir);
         self.bvh.ray_traverse(ray, &mut hit, |_, id| {
-            let tri = self.bvh.primitive_indices[id];
-            match watertight(self.mesh, tri, origin, dir) {
+            match sheared.intersect(&self.corners[id]) {
                 Some(t) if t > t_min => {
+                    let tri = self.bvh.primitive_indices[id];
                     if t < best.0 || (t == best.0 && tri < best.1) {
                         best = (t, tri);
                     }
@@ -145,32 +155,72 @@ impl<'m> Scene<'m> {
     }
 }
 
-/// Watertight ray–triangle intersection (Woop et al. 2013) in f64: edges
-/// shared by two triangles are decided consistently, so a ray through a
-/// shared edge hits exactly one of them... or both, at the same t.
-pub fn watertight(mesh: &Mesh, tri: u32, origin: DVec3, dir: DVec3) -> Option<f64> {
-    let [a, b, c] = mesh.triangles[tri as usize].map(|i| mesh.positions[i as usize] - origin);
-    // permute so the dominant axis of dir is z
-    let kz = dir.abs().max_position();
-    let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
-    if dir[kz] < 0.0 {
-        std::mem::swap(&mut kx, &mut ky);
+/// A ray set up for the watertight test (Woop, Benthin and Wald 2013):
+/// the axis permutation and shear that make its direction +z, computed
+/// once per ray rather than once per triangle, as one matrix.
+#[derive(Clone, Copy, Debug)]
+pub struct ShearedRay {
+    origin: DVec3,
+    /// Rows: e_kx − sx·e_kz, e_ky − sy·e_kz, e_kz, where kz is the
+    /// direction's dominant axis (kx, ky swapped if it points down it).
+    shear: DMat3,
+    sz: f64,
+}
+
+impl ShearedRay {
+    pub fn new(origin: DVec3, dir: DVec3) -> Self {
+        let kz = dir.abs().max_position();
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if dir[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let e = |k: usize| DVec3::AXES[k];
+        let (sx, sy) = (dir[kx] / dir[kz], dir[ky] / dir[kz]);
+        ShearedRay {
+            origin,
+            shear: DMat3::from_cols(e(kx) - sx * e(kz), e(ky) - sy * e(kz), e(kz)).transpose(),
+            sz: 1.0 / dir[kz],
+        }
     }
-    let (sx, sy, sz) = (dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
-    let shear = |p: DVec3| (p[kx] - sx * p[kz], p[ky] - sy * p[kz], p[kz]);
-    let ((ax, ay, az), (bx, by, bz), (cx, cy, cz)) = (shear(a), shear(b), shear(c));
-    let u = cx * by - cy * bx;
-    let v = ax * cy - ay * cx;
-    let w = bx * ay - by * ax;
-    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-        return None;
+
+    /// The ray parameter t of its intersection with the triangle
+    /// `corners`, if any. Watertight: edges shared by two triangles are
+    /// decided consistently, so a ray through a shared edge hits exactly one
+    /// of them... or both, at the same t.
+    #[inline]
+    pub fn intersect(&self, corners: &[DVec3; 3]) -> Option<f64> {
+        let DVec3 {
+            x: ax,
+            y: ay,
+            z: az,
+        } = self.shear * (corners[0] - self.origin);
+        let DVec3 {
+            x: bx,
+            y: by,
+            z: bz,
+        } = self.shear * (corners[1] - self.origin);
+        let DVec3 {
+            x: cx,
+            y: cy,
+            z: cz,
+        } = self.shear * (corners[2] - self.origin);
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        Some((u * az + v * bz + w * cz) * self.sz / det)
     }
-    let det = u + v + w;
-    if det == 0.0 {
-        return None;
-    }
-    let t = (u * az + v * bz + w * cz) * sz / det;
-    Some(t)
+}
+
+/// [`ShearedRay::intersect`] for one ray and one triangle.
+pub fn watertight(corners: &[DVec3; 3], origin: DVec3, dir: DVec3) -> Option<f64> {
+    ShearedRay::new(origin, dir).intersect(corners)
 }
 
 trait AsVec3A {
@@ -205,9 +255,13 @@ mod tests {
         let brute = |o: DVec3, d: DVec3| {
             (0..dm.mesh.triangles.len() as u32)
                 .filter_map(|t| {
-                    watertight(&dm.mesh, t, o, d)
-                        .filter(|&x| x > 1e-9)
-                        .map(|x| (x, t))
+                    watertight(
+                        &dm.mesh.triangles[t as usize].map(|i| dm.mesh.positions[i as usize]),
+                        o,
+                        d,
+                    )
+                    .filter(|&x| x > 1e-9)
+                    .map(|x| (x, t))
                 })
                 .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
         };

@@ -1,22 +1,35 @@
 //! A contact sheet: frames side by side, each labelled with its tilt in a
 //! built-in 5 × 7 pixel font (digits, sign, point and degree sign).
 
-/// 8-bit grey image, row-major.
+use glam::DVec3;
+
+/// 8-bit RGB image, row-major.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Gray {
+pub struct Rgb8 {
     pub width: usize,
     pub height: usize,
-    pub pixels: Vec<u8>,
+    pub pixels: Vec<[u8; 3]>,
 }
 
-/// Luminance (1 = the light's full radiance) to 8-bit grey, clamped.
-pub fn to_gray(width: usize, height: usize, luminance: &[f64]) -> Gray {
-    Gray {
+impl Rgb8 {
+    /// The pixels as bytes, R, G, B per pixel.
+    pub fn bytes(&self) -> &[u8] {
+        self.pixels.as_flattened()
+    }
+}
+
+/// Linear colours (1 = a light's full radiance) to 8 bits per channel,
+/// clamped; values are stored linearly, as the tracer computes them.
+pub fn to_rgb8(width: usize, height: usize, rgb: &[DVec3]) -> Rgb8 {
+    Rgb8 {
         width,
         height,
-        pixels: luminance
+        pixels: rgb
             .iter()
-            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .map(|c| {
+                c.to_array()
+                    .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            })
             .collect(),
     }
 }
@@ -46,7 +59,7 @@ fn glyph(c: char) -> [u8; 7] {
 const LABEL_HEIGHT: usize = 20;
 
 /// Frames in a row-major grid of `columns`, each with its label under it.
-pub fn contact_sheet(frames: &[(Gray, String)], columns: usize) -> Gray {
+pub fn contact_sheet(frames: &[(Rgb8, String)], columns: usize) -> Rgb8 {
     let (fw, fh) = frames.first().map_or((0, 0), |(g, _)| (g.width, g.height));
     let (gap, columns) = (4, columns.max(1));
     let rows = frames.len().div_ceil(columns);
@@ -54,7 +67,7 @@ pub fn contact_sheet(frames: &[(Gray, String)], columns: usize) -> Gray {
         columns * (fw + gap) + gap,
         rows * (fh + LABEL_HEIGHT + gap) + gap,
     );
-    let mut pixels = vec![255u8; width * height];
+    let mut pixels = vec![[255u8; 3]; width * height];
     for (i, (frame, label)) in frames.iter().enumerate() {
         let (x0, y0) = (
             gap + (i % columns) * (fw + gap),
@@ -80,7 +93,7 @@ pub fn contact_sheet(frames: &[(Gray, String)], columns: usize) -> Gray {
                         for (dy, dx) in (0..scale).flat_map(|a| (0..scale).map(move |b| (a, b))) {
                             let (x, y) = (tx + (k * 6 + col) * scale + dx, ty + row * scale + dy);
                             if x < width && y < height {
-                                pixels[y * width + x] = 0;
+                                pixels[y * width + x] = [0; 3];
                             }
                         }
                     }
@@ -88,7 +101,7 @@ pub fn contact_sheet(frames: &[(Gray, String)], columns: usize) -> Gray {
             }
         }
     }
-    Gray {
+    Rgb8 {
         width,
         height,
         pixels,
@@ -101,10 +114,10 @@ mod tests {
 
     #[test]
     fn frames_and_labels_land_where_they_should() {
-        let frame = Gray {
+        let frame = Rgb8 {
             width: 10,
             height: 8,
-            pixels: vec![128; 80],
+            pixels: vec![[128, 64, 32]; 80],
         };
         let sheet = contact_sheet(
             &[(frame.clone(), "-5.0°".into()), (frame, "+5.0°".into())],
@@ -114,8 +127,14 @@ mod tests {
             (sheet.width, sheet.height),
             (2 * 14 + 4, 8 + LABEL_HEIGHT + 8)
         );
-        assert_eq!(sheet.pixels[4 * sheet.width + 4], 128);
-        assert!(sheet.pixels[(8 + 4)..].contains(&0), "labels are drawn");
-        assert_eq!(to_gray(2, 1, &[-1.0, 2.0]).pixels, vec![0, 255]);
+        assert_eq!(sheet.pixels[4 * sheet.width + 4], [128, 64, 32]);
+        assert!(
+            sheet.pixels[(8 + 4)..].contains(&[0; 3]),
+            "labels are drawn"
+        );
+        assert_eq!(
+            to_rgb8(1, 1, &[DVec3::new(-1.0, 0.5, 2.0)]).pixels,
+            vec![[0, 128, 255]]
+        );
     }
 }

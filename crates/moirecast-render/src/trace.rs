@@ -1,7 +1,8 @@
 //! Paths through one closed dielectric mesh in air: at every interface the
 //! ray reflects with the Fresnel probability and refracts otherwise (always
 //! reflects at total internal reflection). Deterministic: the random
-//! numbers come from a SplitMix64 stream the caller seeds.
+//! numbers come from a SplitMix64 stream the caller seeds. A path records
+//! where it ends, not a colour: the lighting is applied afterwards.
 
 use crate::optics::{fresnel, reflect, refract};
 use crate::scene::Scene;
@@ -30,23 +31,42 @@ pub const MAX_BOUNCES: usize = 32;
 /// How far (mm) a new segment starts past the surface it leaves.
 const EPSILON_MM: f64 = 1e-7;
 
-/// The radiance arriving along `-dir` at `origin`: `environment(d)` for the
-/// direction `d` the path finally leaves the mesh in, or 0 where it meets
-/// an absorbing face.
-pub fn radiance(
+/// Where a path from the camera goes: the first surface point it meets,
+/// and how it ends. Light is linear in the path, so one path serves any
+/// lighting (see [`crate::frame::Lighting`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathEnd {
+    /// The first point of the mesh the path meets and the outward normal
+    /// there; `None` if it misses the mesh.
+    pub first: Option<(DVec3, DVec3)>,
+    /// The direction the path leaves the mesh in for good (towards the
+    /// environment); `None` where it meets an absorbing face or is dropped
+    /// after [`MAX_BOUNCES`] interfaces: it then carries no light.
+    pub leaves: Option<DVec3>,
+}
+
+/// Follows a path from `origin` along `dir` (unit) through the mesh of
+/// refractive `index` in air: at every interface it reflects with the
+/// Fresnel probability and refracts otherwise.
+pub fn trace_path(
     scene: &Scene,
     index: f64,
     mut origin: DVec3,
     mut dir: DVec3,
-    environment: &dyn Fn(DVec3) -> f64,
     rng: &mut SplitMix64,
-) -> f64 {
+) -> PathEnd {
+    let mut first = None;
     for _ in 0..MAX_BOUNCES {
         let Some(hit) = scene.intersect(origin, dir, EPSILON_MM) else {
-            return environment(dir);
+            return PathEnd {
+                first,
+                leaves: Some(dir),
+            };
         };
+        let point = origin + hit.t * dir;
+        first.get_or_insert((point, hit.normal));
         if scene.absorbs(hit.triangle) {
-            return 0.0;
+            break;
         }
         let leaving = dir.dot(hit.normal) > 0.0;
         let (normal, n1, n2) = if leaving {
@@ -54,7 +74,6 @@ pub fn radiance(
         } else {
             (hit.normal, 1.0, index)
         };
-        let point = origin + hit.t * dir;
         let r = fresnel(-dir.dot(normal), n1, n2);
         dir = match refract(dir, normal, n1, n2) {
             Some(t) if rng.next_f64() >= r => t,
@@ -62,7 +81,10 @@ pub fn radiance(
         };
         origin = point;
     }
-    0.0
+    PathEnd {
+        first,
+        leaves: None,
+    }
 }
 
 #[cfg(test)]
@@ -107,14 +129,9 @@ mod tests {
             let mut rng = SplitMix64(seed);
             (0..n)
                 .map(|_| {
-                    radiance(
-                        &scene,
-                        1.41,
-                        DVec3::new(0.1, 0.2, 5.0),
-                        -DVec3::Z,
-                        &up,
-                        &mut rng,
-                    )
+                    let end =
+                        trace_path(&scene, 1.41, DVec3::new(0.1, 0.2, 5.0), -DVec3::Z, &mut rng);
+                    end.leaves.map_or(0.0, up)
                 })
                 .sum()
         };

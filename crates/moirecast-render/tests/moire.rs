@@ -4,14 +4,15 @@
 //! deterministic for a seed. A printed device shows the rings against its
 //! backlight.
 
+use glam::DVec3;
 use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::profile::{Raster, SampledProfile};
 use moirecast_kernel::progress::Silent;
 use moirecast_kernel::{
     BaseKind, Design, DesignParams, PitchSurface, PrintedBase, Profile, ProfileMode,
 };
-use moirecast_render::frame::{render, traced_mesh, Camera, Frame, View};
-use moirecast_render::{fidelity, Scene};
+use moirecast_render::frame::{render, traced_mesh, Camera, Frame, Lighting, View};
+use moirecast_render::Scene;
 
 const SIZE: f64 = 16.0;
 const TILTS: [f64; 5] = [-5.0, -2.5, 0.0, 2.5, 5.0];
@@ -57,6 +58,16 @@ fn scrambled() -> Design {
 }
 
 fn frame(phase_of: &Design, device: &Design, tilt: f64, seed: u64) -> Frame {
+    lit_frame(phase_of, device, tilt, seed, Lighting::default_for(device))
+}
+
+fn lit_frame(
+    phase_of: &Design,
+    device: &Design,
+    tilt: f64,
+    seed: u64,
+    lighting: Lighting,
+) -> Frame {
     let dm = mesh_device(device, &Silent).unwrap();
     let (mesh, absorbing) = traced_mesh(device, &dm).unwrap();
     render(
@@ -69,6 +80,7 @@ fn frame(phase_of: &Design, device: &Design, tilt: f64, seed: u64) -> Frame {
             tilt_across: tilt.to_radians(),
             tilt_along: 0.0,
             camera: Camera::Orthographic,
+            lighting,
             seed,
         },
     )
@@ -78,10 +90,7 @@ fn frame(phase_of: &Design, device: &Design, tilt: f64, seed: u64) -> Frame {
 fn best_fidelity(phase_of: &Design, device: &Design) -> f64 {
     TILTS
         .iter()
-        .map(|&t| {
-            let f = frame(phase_of, device, t, 1);
-            fidelity(&f.luminance, &f.phase, f.width, f.height, f.period_px)
-        })
+        .map(|&t| frame(phase_of, device, t, 1).fidelity())
         .fold(0.0, f64::max)
 }
 
@@ -113,7 +122,7 @@ fn a_printed_device_shows_the_rings_against_a_backlight() {
     let best = best_fidelity(&good, &good);
     let unshifted = best_fidelity(&good, &flat);
     let f = frame(&good, &good, 0.0, 1);
-    let mean = f.luminance.iter().sum::<f64>() / f.luminance.len() as f64;
+    let mean = f.mean_luminance();
     eprintln!("printed fidelity: rings {best:.3}, flat {unshifted:.3}; mean luminance {mean:.3}");
     assert!(best >= 0.8, "printed rings {best}");
     assert!(unshifted < 0.15, "printed flat {unshifted}");
@@ -135,19 +144,20 @@ fn a_far_perspective_camera_approaches_the_orthographic_one() {
         tilt_across: 0.0,
         tilt_along: 0.0,
         camera,
+        lighting: Lighting::default_for(&d),
         seed: 3,
     };
-    let score = |f: &Frame| fidelity(&f.luminance, &f.phase, f.width, f.height, f.period_px);
+    let score = |f: &Frame| f.fidelity();
     let ortho = render(&d, &scene, view(Camera::Orthographic));
     let far = render(&d, &scene, view(Camera::Perspective { distance: 1e5 }));
     let near = render(&d, &scene, view(Camera::Perspective { distance: 30.0 }));
     let differing = |a: &Frame, b: &Frame| {
-        a.luminance
+        a.signal
             .iter()
-            .zip(&b.luminance)
+            .zip(&b.signal)
             .filter(|(x, y)| (*x - *y).abs() > 0.25)
             .count() as f64
-            / a.luminance.len() as f64
+            / a.signal.len() as f64
     };
     eprintln!(
         "fidelity ortho {:.3} far {:.3} near {:.3}; pixels differing: far {:.3}, near {:.3}",
@@ -169,6 +179,47 @@ fn frames_are_deterministic_for_a_seed() {
         frame(&d, &d, 2.5, 7),
         frame(&d, &d, 2.5, 8),
     );
-    assert_eq!(a.luminance, b.luminance);
-    assert_ne!(a.luminance, c.luminance);
+    assert_eq!(a.rgb, b.rgb);
+    assert_ne!(a.rgb, c.rgb);
+}
+
+/// Under the two coloured lateral lights (the default), the dual-lens
+/// moiré's level lines take the lights' colours: the frame holds both
+/// hues, and the colour signal scores the rings as the white light's
+/// luminance does. Swapping the lights swaps the hues, pixel by pixel.
+#[test]
+fn the_level_lines_take_the_colours_of_the_lateral_lights() {
+    use moirecast_render::frame::{AMBER, SKY_BLUE};
+    let d = rings(1.0, None);
+    let coloured = |plus_x, minus_x| Lighting::Lateral { plus_x, minus_x };
+    let white = coloured(DVec3::ONE, DVec3::ZERO);
+    let best = |lighting: Lighting| {
+        TILTS
+            .iter()
+            .map(|&t| (lit_frame(&d, &d, t, 1, lighting).fidelity(), t))
+            .fold((0.0, 0.0), |a, b| if b.0 > a.0 { b } else { a })
+    };
+    let (by_colour, tilt) = best(coloured(AMBER, SKY_BLUE));
+    let (by_luminance, _) = best(white);
+    let f = lit_frame(&d, &d, tilt, 1, coloured(AMBER, SKY_BLUE));
+    let share = |pred: &dyn Fn(DVec3) -> bool| {
+        f.rgb.iter().filter(|&&c| pred(c)).count() as f64 / f.rgb.len() as f64
+    };
+    let (warm, cool) = (share(&|c| c.x > c.z + 0.3), share(&|c| c.z > c.x + 0.3));
+    let swapped = lit_frame(&d, &d, tilt, 1, coloured(SKY_BLUE, AMBER));
+    eprintln!(
+        "fidelity by colour {by_colour:.3} (tilt {tilt}), by white luminance {by_luminance:.3}; warm pixels {warm:.3}, cool {cool:.3}"
+    );
+    assert!(by_colour >= 0.8, "{by_colour}");
+    assert!((by_colour - by_luminance).abs() < 0.05);
+    assert!(warm > 0.15 && cool > 0.15, "warm {warm}, cool {cool}");
+    // the same paths (same seed) under swapped lights: what one pixel gets
+    // from each light, the other gets from the other, so their sum is the
+    // two lights' sum times the share of paths that reach a light
+    let both = AMBER + SKY_BLUE;
+    for (a, b) in f.rgb.iter().zip(&swapped.rgb) {
+        let sum = *a + *b;
+        let k = sum.x / both.x;
+        assert!((sum - k * both).length() < 1e-12 && (0.0..=1.0 + 1e-12).contains(&k));
+    }
 }
