@@ -7,7 +7,7 @@ use crate::{commit_with_report, refuse_failed, DeviceBuild, DeviceOutcome};
 use anyhow::{Context, Result};
 use moirecast_export::{stl_bytes, threemf_bytes, Material, Object, OutputSet};
 use moirecast_kernel::check::{CheckResult, SolidMesh, SolidSpec};
-use moirecast_kernel::printed::{duty_along_lines, printed_bodies, LineDuty, PrintedBodies};
+use moirecast_kernel::printed::{duty_along_lines, printed_bodies, PrintedBodies};
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{BaseKind, Design, PrintedBase};
 use moirecast_spec::Spec;
@@ -93,20 +93,28 @@ impl PrintedBuild {
             shells,
             ..SolidSpec::DEVICE
         };
-        let mut checks = Vec::new();
-        let mut solids = Vec::new();
-        for (file, mesh, spec) in [
+        // the three meshes are checked at once, reported in this order
+        use rayon::prelude::*;
+        let results: Vec<_> = [
             ("device-clear.stl", &b.clear, spec(b.clear_genus, 1)),
             ("device-black.stl", &b.black, spec(0, b.bands)),
             ("the whole device", &b.slab, spec(0, 1)),
-        ] {
+        ]
+        .into_par_iter()
+        .map(|(file, mesh, spec)| {
             let (found, solid) = SolidMesh::validate_for(mesh, spec);
-            checks.extend(found.into_iter().map(|mut c| {
-                c.detail = format!("{file}: {}", c.detail);
-                c
-            }));
-            solids.push(solid);
-        }
+            let found: Vec<CheckResult> = found
+                .into_iter()
+                .map(|mut c| {
+                    c.detail = format!("{file}: {}", c.detail);
+                    c
+                })
+                .collect();
+            (found, solid)
+        })
+        .collect();
+        let (checks, solids): (Vec<Vec<CheckResult>>, Vec<_>) = results.into_iter().unzip();
+        let checks = checks.concat();
         let all = match solids[..] {
             [Some(clear), Some(black), Some(_)] => Some([clear, black]),
             _ => None,
@@ -129,10 +137,15 @@ pub fn build_printed(design: &Design, build: &DeviceBuild) -> Result<PrintedBuil
     let pb = printed_base(design);
     let bodies = printed_bodies(design, &build.mesh).context("building the printed bodies")?;
     let mut checks = Vec::new();
-    let (clear, black, slab) = (
-        bodies.clear.volume(),
-        bodies.black.volume(),
-        bodies.slab.volume(),
+    let ((clear, black, slab), lines) = rayon::join(
+        || {
+            (
+                bodies.clear.volume(),
+                bodies.black.volume(),
+                bodies.slab.volume(),
+            )
+        },
+        || duty_along_lines(design, &build.mesh, DUTY_LINES),
     );
     checks.push(CheckResult::at_most(
         "bodies-fill-device",
@@ -144,7 +157,6 @@ pub fn build_printed(design: &Design, build: &DeviceBuild) -> Result<PrintedBuil
     let layer = bodies.layer_area * pb.band_thickness;
     // over whole periods: the walls cut the first and last period anywhere
     let by_volume = bodies.black_area_whole / bodies.layer_area_whole;
-    let lines: LineDuty = duty_along_lines(design, &build.mesh, DUTY_LINES);
     let report = PrintedReport {
         bands: bodies.bands,
         clear_genus: bodies.clear_genus,
@@ -192,8 +204,13 @@ pub(crate) fn write_printed_device(
     let b = &printed.bodies;
     let mut files = OutputSet::new();
     let mut reports = std::collections::BTreeMap::new();
-    for (name, solid) in [("device-clear.stl", clear), ("device-black.stl", black)] {
-        let bytes = stl_bytes(name, solid)?;
+    let stls = [("device-clear.stl", clear), ("device-black.stl", black)];
+    // both encoded at once: stl_io writes one triangle at a time
+    let (clear_stl, black_stl) = rayon::join(
+        || stl_bytes(stls[0].0, stls[0].1),
+        || stl_bytes(stls[1].0, stls[1].1),
+    );
+    for ((name, solid), bytes) in stls.into_iter().zip([clear_stl?, black_stl?]) {
         reports.insert(name.to_string(), FileReport::of(solid.mesh(), bytes.len()));
         files.add(name, bytes);
     }

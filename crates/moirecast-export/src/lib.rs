@@ -128,21 +128,38 @@ impl OutputSet {
             path: dir.to_owned(),
             source,
         })?;
-        let mut temps = Vec::new();
+        let temps: Vec<(PathBuf, PathBuf)> = self
+            .files
+            .iter()
+            .map(|(name, _)| {
+                (
+                    dir.join(format!(".{name}.{}.tmp", std::process::id())),
+                    dir.join(name),
+                )
+            })
+            .collect();
         let cleanup = |temps: &[(PathBuf, PathBuf)]| {
             for (t, _) in temps {
                 let _ = std::fs::remove_file(t);
             }
         };
-        for (name, bytes) in &self.files {
-            let target = dir.join(name);
-            let temp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-            if let Err(source) = std::fs::write(&temp, bytes) {
-                cleanup(&temps);
-                let _ = std::fs::remove_file(&temp);
-                return Err(ExportError::Io { path: temp, source });
-            }
-            temps.push((temp, target));
+        // the files are written in parallel: copying tens of MB into the
+        // page cache is a large part of a run
+        use rayon::prelude::*;
+        let written: Vec<Result<(), ExportError>> = self
+            .files
+            .par_iter()
+            .zip(&temps)
+            .map(|((_, bytes), (temp, _))| {
+                std::fs::write(temp, bytes).map_err(|source| ExportError::Io {
+                    path: temp.clone(),
+                    source,
+                })
+            })
+            .collect();
+        if let Some(error) = written.into_iter().find_map(Result::err) {
+            cleanup(&temps);
+            return Err(error);
         }
         for (temp, target) in &temps {
             if let Err(source) = std::fs::rename(temp, target) {

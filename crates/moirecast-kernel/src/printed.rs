@@ -515,40 +515,48 @@ pub fn duty_along_lines(design: &Design, dm: &DeviceMesh, lines: usize) -> LineD
         BaseKind::Printed(pb) => pb.duty,
         BaseKind::DualLens => 0.0,
     };
-    let (mut black_len, mut window_len, mut periods, mut worst) = (0.0, 0.0, 0, 0.0f64);
-    for l in 0..lines {
-        let y = -hh + 2.0 * hh * (l as f64 + 0.5) / lines as f64;
-        let mut spans: Vec<(f64, f64)> = black
-            .iter()
-            .filter_map(|t| line_through_triangle(t, y))
-            .collect();
-        spans.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut merged: Vec<(f64, f64)> = Vec::new();
-        for (a, b) in spans {
-            match merged.last_mut() {
-                Some(last) if a <= last.1 + 1e-9 => last.1 = last.1.max(b),
-                _ => merged.push((a, b)),
+    // lines in parallel, summed in line order afterwards (deterministic)
+    use rayon::prelude::*;
+    let per_line: Vec<Option<(f64, f64, usize)>> = (0..lines)
+        .into_par_iter()
+        .map(|l| {
+            let y = -hh + 2.0 * hh * (l as f64 + 0.5) / lines as f64;
+            let mut spans: Vec<(f64, f64)> = black
+                .iter()
+                .filter_map(|t| line_through_triangle(t, y))
+                .collect();
+            spans.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let mut merged: Vec<(f64, f64)> = Vec::new();
+            for (a, b) in spans {
+                match merged.last_mut() {
+                    Some(last) if a <= last.1 + 1e-9 => last.1 = last.1.max(b),
+                    _ => merged.push((a, b)),
+                }
             }
-        }
-        let (xl, _) = design.outline_x;
-        // band starts: left ends not on the left wall
-        let starts: Vec<f64> = merged
-            .iter()
-            .map(|s| s.0)
-            .filter(|&x| x > xl + 1e-6)
-            .collect();
-        if starts.len() < 2 {
-            continue;
-        }
-        let (w0, w1) = (starts[0], *starts.last().unwrap());
-        let inside: f64 = merged
-            .iter()
-            .map(|&(a, b)| (b.min(w1) - a.max(w0)).max(0.0))
-            .sum();
+            let (xl, _) = design.outline_x;
+            // band starts: left ends not on the left wall
+            let starts: Vec<f64> = merged
+                .iter()
+                .map(|s| s.0)
+                .filter(|&x| x > xl + 1e-6)
+                .collect();
+            if starts.len() < 2 {
+                return None;
+            }
+            let (w0, w1) = (starts[0], *starts.last().unwrap());
+            let inside: f64 = merged
+                .iter()
+                .map(|&(a, b)| (b.min(w1) - a.max(w0)).max(0.0))
+                .sum();
+            Some((inside, w1 - w0, starts.len() - 1))
+        })
+        .collect();
+    let (mut black_len, mut window_len, mut periods, mut worst) = (0.0, 0.0, 0, 0.0f64);
+    for (inside, window, n) in per_line.into_iter().flatten() {
         black_len += inside;
-        window_len += w1 - w0;
-        periods += starts.len() - 1;
-        worst = worst.max((inside / (w1 - w0) - target).abs());
+        window_len += window;
+        periods += n;
+        worst = worst.max((inside / window - target).abs());
     }
     LineDuty {
         duty: if window_len > 0.0 {

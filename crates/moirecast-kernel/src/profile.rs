@@ -177,11 +177,14 @@ impl SampledProfile {
             top * (1.0 - ty) + bot * ty
         };
         let mut values = vec![0.0; nx * ny];
-        for j in 0..ny {
-            for i in 0..nx {
-                let l = lum(origin.x + i as f64 * spacing, origin.y + j as f64 * spacing);
-                values[j * nx + i] = if invert { 1.0 - l } else { l };
-            }
+        {
+            use rayon::prelude::*;
+            values.par_chunks_mut(nx).enumerate().for_each(|(j, row)| {
+                for (i, v) in row.iter_mut().enumerate() {
+                    let l = lum(origin.x + i as f64 * spacing, origin.y + j as f64 * spacing);
+                    *v = if invert { 1.0 - l } else { l };
+                }
+            });
         }
         if let ProfileMode::Shape { threshold } = mode {
             let inside: Vec<bool> = values.iter().map(|&l| l < threshold).collect();
@@ -380,27 +383,31 @@ fn gaussian_blur(values: &mut [f64], nx: usize, ny: usize, sigma_cells: f64) {
         .collect();
     let sum: f64 = kernel.iter().sum();
     let kernel: Vec<f64> = kernel.iter().map(|k| k / sum).collect();
+    // rows in parallel; each value sums its kernel taps in the same order
+    // as a serial loop would, so the result does not depend on the threads
+    use rayon::prelude::*;
     let mut tmp = vec![0.0; values.len()];
-    for j in 0..ny {
-        for i in 0..nx {
+    tmp.par_chunks_mut(nx).enumerate().for_each(|(j, row)| {
+        let src = &values[j * nx..(j + 1) * nx];
+        for (i, out) in row.iter_mut().enumerate() {
             let mut acc = 0.0;
             for (t, w) in kernel.iter().enumerate() {
                 let ii = (i as isize + t as isize - radius).clamp(0, nx as isize - 1) as usize;
-                acc += w * values[j * nx + ii];
+                acc += w * src[ii];
             }
-            tmp[j * nx + i] = acc;
+            *out = acc;
         }
-    }
-    for j in 0..ny {
-        for i in 0..nx {
-            let mut acc = 0.0;
-            for (t, w) in kernel.iter().enumerate() {
-                let jj = (j as isize + t as isize - radius).clamp(0, ny as isize - 1) as usize;
-                acc += w * tmp[jj * nx + i];
+    });
+    // the vertical pass row by row: whole source rows, read contiguously
+    values.par_chunks_mut(nx).enumerate().for_each(|(j, row)| {
+        row.fill(0.0);
+        for (t, w) in kernel.iter().enumerate() {
+            let jj = (j as isize + t as isize - radius).clamp(0, ny as isize - 1) as usize;
+            for (out, v) in row.iter_mut().zip(&tmp[jj * nx..(jj + 1) * nx]) {
+                *out += w * v;
             }
-            values[j * nx + i] = acc;
         }
-    }
+    });
 }
 
 #[cfg(test)]
