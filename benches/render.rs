@@ -31,7 +31,7 @@ fn main() {
     println!("scene (BVH)       {:8.1} ms", median(scene_t) * 1e3);
     let scene = Scene::new(&dm.mesh);
     for size in [256, 512] {
-        let mut fid = 0.0;
+        let mut fid = (0.0, 0.0);
         let times: Vec<f64> = (0..runs)
             .map(|_| {
                 let t = Instant::now();
@@ -50,13 +50,15 @@ fn main() {
                     },
                 );
                 let e = t.elapsed().as_secs_f64();
-                fid = f.fidelity();
+                fid = (f.fidelity(), f.local_fidelity());
                 e
             })
             .collect();
         println!(
-            "frame {size} x {size}  {:8.1} ms  (scene built once, above; 1 sample per pixel; fidelity {fid:.3})",
-            median(times) * 1e3
+            "frame {size} x {size}  {:8.1} ms  (scene built once, above; 1 sample per pixel; fidelity {:.3}, local {:.3})",
+            median(times) * 1e3,
+            fid.0,
+            fid.1
         );
     }
 }

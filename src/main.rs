@@ -340,8 +340,8 @@ fn run(cli: Cli) -> Result<()> {
             bars.done();
             let done = result?;
             if !run.quiet {
-                for (tilt, f) in &done.fidelity {
-                    eprintln!("tilt {tilt:+6.1}°: fidelity {f:.3}");
+                for (tilt, f, local) in &done.fidelity {
+                    eprintln!("tilt {tilt:+6.1}°: fidelity {f:.3}, local fidelity {local:.3}");
                 }
                 print_written(&done.written, done.bytes, started);
             }
@@ -360,7 +360,7 @@ fn run(cli: Cli) -> Result<()> {
             let done = result?;
             if !run.quiet {
                 let (a, d, f) = done.best;
-                eprintln!("best cell: a = {a}, d = {d:.4} mm, fidelity {f:.3}");
+                eprintln!("best cell: a = {a}, d = {d:.4} mm, local fidelity {f:.3}");
                 print_written(&done.written, done.bytes, started);
             }
         }

@@ -131,6 +131,9 @@ struct FrameReport {
     file: String,
     tilt_deg: f64,
     fidelity: f64,
+    /// Fidelity within windows of the frame (beside METHOD §8; see
+    /// `moirecast_render::fidelity::local_fidelity`).
+    local_fidelity: f64,
     /// Mean Rec. 709 luminance of the frame's linear colours.
     mean_luminance: f64,
 }
@@ -149,16 +152,18 @@ struct RenderReport {
     camera: String,
     light: String,
     frames: Vec<FrameReport>,
+    /// The frame with the highest local fidelity, and its two fidelities.
     best_frame: usize,
     best_fidelity: f64,
+    best_local_fidelity: f64,
 }
 
 /// What `moirecast render` wrote.
 pub struct RenderOutcome {
     pub written: Vec<PathBuf>,
     pub bytes: usize,
-    /// (tilt in degrees, fidelity) per frame.
-    pub fidelity: Vec<(f64, f64)>,
+    /// (tilt in degrees, fidelity, local fidelity) per frame.
+    pub fidelity: Vec<(f64, f64, f64)>,
 }
 
 /// PNG bytes of `image`: 8-bit grey where every pixel is grey (a printed
@@ -243,6 +248,7 @@ pub fn run_render(
             file: name,
             tilt_deg: tilt,
             fidelity,
+            local_fidelity: frame.local_fidelity(),
             mean_luminance: frame.mean_luminance(),
         });
         images.push(image);
@@ -257,13 +263,16 @@ pub fn run_render(
     files.add("sheet.png", png(&contact_sheet(&labelled, columns))?);
     files.add("tilt.gif", gif(&images)?);
     let best = reports.iter().enumerate().fold(0, |b, (i, r)| {
-        if r.fidelity > reports[b].fidelity {
+        if r.local_fidelity > reports[b].local_fidelity {
             i
         } else {
             b
         }
     });
-    let fidelity = reports.iter().map(|r| (r.tilt_deg, r.fidelity)).collect();
+    let fidelity = reports
+        .iter()
+        .map(|r| (r.tilt_deg, r.fidelity, r.local_fidelity))
+        .collect();
     let report = RenderReport {
         moirecast: env!("CARGO_PKG_VERSION"),
         spec: crate::report::spec_name(spec),
@@ -279,6 +288,7 @@ pub fn run_render(
         light: lighting.describe(),
         best_frame: best,
         best_fidelity: reports.get(best).map_or(0.0, |r| r.fidelity),
+        best_local_fidelity: reports.get(best).map_or(0.0, |r| r.local_fidelity),
         frames: reports,
     };
     let (written, bytes) = commit_with_report(files, &report, out)?;

@@ -14,34 +14,100 @@ pub const PHASE_BINS: usize = 32;
 /// pixel does not see the device), with the lens period `period_px` pixels
 /// long. 0 for a frame without variance.
 pub fn fidelity(values: &[f64], phase: &[f64], width: usize, height: usize, period_px: f64) -> f64 {
+    let smooth = low_passed(values, phase, width, height, period_px);
+    let (within, total) = variances(&smooth, phase, (0..width * height).collect(), PHASE_BINS);
+    r_squared(within, total)
+}
+
+/// Windows per axis of [`local_fidelity`].
+pub const LOCAL_WINDOWS: usize = 4;
+/// Phase bins per window of [`local_fidelity`]: few, so that a window of a
+/// few hundred pixels does not explain noise by chance (R² of pure noise is
+/// about (bins − 1) / pixels).
+pub const LOCAL_PHASE_BINS: usize = 8;
+
+/// [`fidelity`] within each of [`LOCAL_WINDOWS`]² windows of the frame,
+/// pooled: 1 − Σ within-bin variance / Σ variance about each window's mean.
+/// On a curved device the view meets the surface at angles that change
+/// across the frame, which shifts the level lines' brightness by an offset
+/// that changes too; one set of bins over the whole frame mixes the
+/// offsets, windows do not. Equal to [`fidelity`]'s idea where the offset
+/// is constant (a plane); not part of METHOD §8, reported beside it.
+pub fn local_fidelity(
+    values: &[f64],
+    phase: &[f64],
+    width: usize,
+    height: usize,
+    period_px: f64,
+) -> f64 {
+    let smooth = low_passed(values, phase, width, height, period_px);
+    let (mut within, mut total) = (0.0, 0.0);
+    for wy in 0..LOCAL_WINDOWS {
+        for wx in 0..LOCAL_WINDOWS {
+            let (x0, x1) = (wx * width / LOCAL_WINDOWS, (wx + 1) * width / LOCAL_WINDOWS);
+            let (y0, y1) = (
+                wy * height / LOCAL_WINDOWS,
+                (wy + 1) * height / LOCAL_WINDOWS,
+            );
+            let pixels = (y0..y1)
+                .flat_map(|y| (x0..x1).map(move |x| y * width + x))
+                .collect();
+            let (w, t) = variances(&smooth, phase, pixels, LOCAL_PHASE_BINS);
+            within += w;
+            total += t;
+        }
+    }
+    r_squared(within, total)
+}
+
+/// The frame low-passed over one lens period (a box one period wide along
+/// each axis, which removes the lens carrier).
+fn low_passed(
+    values: &[f64],
+    phase: &[f64],
+    width: usize,
+    height: usize,
+    period_px: f64,
+) -> Vec<f64> {
     assert_eq!(values.len(), width * height);
     assert_eq!(phase.len(), width * height);
-    let smooth = box_blur(values, width, height, (period_px / 2.0).round() as usize);
-    let mut sum = [0.0f64; PHASE_BINS];
-    let mut sum2 = [0.0f64; PHASE_BINS];
-    let mut count = [0usize; PHASE_BINS];
-    for (v, p) in smooth.iter().zip(phase) {
+    box_blur(values, width, height, (period_px / 2.0).round() as usize)
+}
+
+/// (variance within phase bins, variance about the mean), both as sums of
+/// squares, over the `pixels` that see the device.
+fn variances(smooth: &[f64], phase: &[f64], pixels: Vec<usize>, bins: usize) -> (f64, f64) {
+    let mut sum = vec![0.0f64; bins];
+    let mut sum2 = vec![0.0f64; bins];
+    let mut count = vec![0usize; bins];
+    for i in pixels {
+        let (v, p) = (smooth[i], phase[i]);
         if !p.is_finite() {
             continue;
         }
-        let b = ((p.rem_euclid(1.0) * PHASE_BINS as f64) as usize).min(PHASE_BINS - 1);
+        let b = ((p.rem_euclid(1.0) * bins as f64) as usize).min(bins - 1);
         sum[b] += v;
         sum2[b] += v * v;
         count[b] += 1;
     }
     let n: usize = count.iter().sum();
     if n == 0 {
-        return 0.0;
+        return (0.0, 0.0);
     }
     let mean = sum.iter().sum::<f64>() / n as f64;
     let total = sum2.iter().sum::<f64>() - n as f64 * mean * mean;
-    if total <= 0.0 {
-        return 0.0;
-    }
-    let within: f64 = (0..PHASE_BINS)
+    let within: f64 = (0..bins)
         .filter(|&b| count[b] > 0)
         .map(|b| sum2[b] - sum[b] * sum[b] / count[b] as f64)
         .sum();
+    (within, total.max(0.0))
+}
+
+/// 1 − within / total, in [0, 1]; 0 without variance.
+fn r_squared(within: f64, total: f64) -> f64 {
+    if total <= 0.0 {
+        return 0.0;
+    }
     (1.0 - within / total).clamp(0.0, 1.0)
 }
 
@@ -107,5 +173,51 @@ mod tests {
         let nan = vec![f64::NAN; 64 * 48];
         assert_eq!(fidelity(&vec![0.5; 64 * 48], &p, 64, 48, 1.0), 0.0);
         assert_eq!(fidelity(&v, &nan, 64, 48, 1.0), 0.0);
+    }
+
+    /// Level lines whose brightness offset drifts across the frame (as on a
+    /// curved device, seen at changing angles): one set of bins over the
+    /// frame mixes the offsets, windows recover the lines; noise stays low.
+    #[test]
+    fn local_fidelity_follows_level_lines_whose_offset_drifts() {
+        let (w, h) = (128, 128);
+        let phase = |x: usize, y: usize| ((x as f64 + 0.5 * y as f64) / 17.0).fract();
+        let (v, p): (Vec<f64>, Vec<f64>) = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let offset = 0.5 * (x as f64 / w as f64 + y as f64 / h as f64); // up to 1 period
+                let p = phase(x, y);
+                ((2.0 * std::f64::consts::PI * (p + offset)).cos(), p)
+            })
+            .unzip();
+        let (global, local) = (
+            fidelity(&v, &p, w, h, 1.0),
+            local_fidelity(&v, &p, w, h, 1.0),
+        );
+        eprintln!("global {global}, local {local}");
+        assert!(global < 0.3, "global {global}");
+        assert!(local > 0.8, "local {local}");
+        // brightness unrelated to the phase: white noise
+        let mut state = 7u64;
+        let noise: Vec<f64> = (0..w * h)
+            .map(|_| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (state >> 11) as f64 / (1u64 << 53) as f64
+            })
+            .collect();
+        let by_chance = local_fidelity(&noise, &p, w, h, 1.0);
+        eprintln!("noise {by_chance}");
+        assert!(by_chance < 0.05, "noise {by_chance}");
+        // where the offset is constant, both agree closely
+        let (v2, _): (Vec<f64>, Vec<f64>) = (0..w * h)
+            .map(|i| (((2.0 * std::f64::consts::PI * p[i]).cos()), 0.0))
+            .unzip();
+        let (g2, l2) = (
+            fidelity(&v2, &p, w, h, 1.0),
+            local_fidelity(&v2, &p, w, h, 1.0),
+        );
+        assert!(g2 > 0.99 && l2 > 0.95, "{g2} {l2}");
     }
 }

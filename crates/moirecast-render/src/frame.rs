@@ -63,6 +63,17 @@ impl Frame {
         self.rgb.iter().map(|&c| luminance(c)).sum::<f64>() / self.rgb.len().max(1) as f64
     }
 
+    /// The frame's [`crate::fidelity::local_fidelity`].
+    pub fn local_fidelity(&self) -> f64 {
+        crate::fidelity::local_fidelity(
+            &self.signal,
+            &self.phase,
+            self.width,
+            self.height,
+            self.period_px,
+        )
+    }
+
     /// The frame's [`crate::fidelity`].
     pub fn fidelity(&self) -> f64 {
         crate::fidelity(
