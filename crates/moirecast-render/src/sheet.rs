@@ -77,8 +77,9 @@ pub fn contact_sheet(frames: &[(Rgb8, String)], columns: usize) -> Rgb8 {
             pixels[(y0 + y) * width + x0..(y0 + y) * width + x0 + fw]
                 .copy_from_slice(&frame.pixels[y * fw..(y + 1) * fw]);
         }
-        // the label centred under the frame, at scale 2 where it fits
-        let scale = if label.chars().count() * 12 <= fw {
+        // the label centred under the frame, at scale 2 where it fits with
+        // room to spare (labels of neighbouring frames must not touch)
+        let scale = if label.chars().count() * 12 + 8 <= fw {
             2
         } else {
             1
