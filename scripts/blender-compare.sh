@@ -3,7 +3,11 @@
 # and light (issue 6's comparison; a benchmark, not a test: it needs
 # Debian's blender, a 640 MB install: apt-get install blender).
 #
-#   scripts/blender-compare.sh [SPEC [SIZE [TILT [CYCLES_SAMPLES]]]]
+#   scripts/blender-compare.sh [SPEC [SIZE [TILT [CYCLES_SAMPLES [LIGHTS]]]]]
+#
+# LIGHTS: `white` (default: one white light from +x) or `default` (the
+# amber and sky blue lights of `moirecast render`); colours are compared
+# channel by channel.
 #
 # Prints JSON: times, noise (σ of two seeds' difference / √2), our samples
 # and time at Cycles' noise, their ratio, and the images' correlation (raw,
@@ -14,6 +18,12 @@ SPEC=${1:-molds/saddle-horse.toml}
 SIZE=${2:-256}
 TILT=${3:-0}
 SAMPLES=${4:-128}
+LIGHTS=${5:-white}
+case "$LIGHTS" in
+    white) COLOURS=("1,1,1" "0,0,0") ;;
+    default) COLOURS=("1,0.6,0.15" "0.15,0.45,1") ;; # moirecast_render::frame::{AMBER, SKY_BLUE}
+    *) echo "LIGHTS is white or default, not $LIGHTS" >&2; exit 1 ;;
+esac
 command -v blender >/dev/null || { echo "blender is not installed (apt-get install blender)" >&2; exit 1; }
 OUT=$(mktemp -d)
 trap 'rm -rf "$OUT"' EXIT
@@ -24,8 +34,8 @@ INDEX=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['design'
 for spp in 2 4 8; do
     for seed in 1 2; do
         "$BIN" render "$SPEC" -o "$OUT/ours-$spp-$seed" --size "$SIZE" --samples "$spp" \
-            --tilts="$TILT" --seed "$seed" --lights white -v 2> "$OUT/ours-$spp-$seed.log" >/dev/null
+            --tilts="$TILT" --seed "$seed" --lights "$LIGHTS" -v 2> "$OUT/ours-$spp-$seed.log" >/dev/null
     done
 done
 blender -b --factory-startup -noaudio -P scripts/blender/cycles.py -- \
-    "$OUT" "$SIZE" "$TILT" "$INDEX" "$SAMPLES" 2>&1 | sed -n 's/^COMPARISON //p'
+    "$OUT" "$SIZE" "$TILT" "$INDEX" "$SAMPLES" "${COLOURS[@]}" 2>&1 | sed -n 's/^COMPARISON //p'

@@ -1,7 +1,10 @@
 """Blender Cycles on moirecast's device.stl with moirecast render's camera
 and light (METHOD §8), then the comparison. Run by scripts/blender-compare.sh:
 
-    blender -b --factory-startup -noaudio -P scripts/blender/cycles.py -- OUT SIZE TILT INDEX SAMPLES
+    blender -b --factory-startup -noaudio -P scripts/blender/cycles.py -- OUT SIZE TILT INDEX SAMPLES [PLUS_X MINUS_X]
+
+PLUS_X and MINUS_X are the lateral lights' linear colours as r,g,b (default
+1,1,1 and 0,0,0: moirecast's `--lights white`).
 
 OUT holds device/device.stl and ours-<spp>-<seed>/frame-00.png with their
 logs; this writes cycles-<seed>.png and prints the comparison as JSON.
@@ -16,8 +19,11 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-out, size, tilt, index, samples = sys.argv[sys.argv.index("--") + 1 :]
+args = sys.argv[sys.argv.index("--") + 1 :]
+out, size, tilt, index, samples = args[:5]
 out, size, tilt, index, samples = pathlib.Path(out), int(size), float(tilt), float(index), int(samples)
+colour = lambda text: tuple(float(v) for v in text.split(","))
+plus_x, minus_x = (colour(args[5]), colour(args[6])) if len(args) > 6 else ((1, 1, 1), (0, 0, 0))
 LIGHT_EDGE = 0.15  # moirecast_render::frame::LIGHT_EDGE
 
 scene = bpy.context.scene
@@ -39,8 +45,9 @@ mat_out = nodes.new("ShaderNodeOutputMaterial")
 glass.node_tree.links.new(bsdf.outputs["BSDF"], mat_out.inputs["Surface"])
 device.data.materials.append(glass)
 
-# the lateral light: directions leaving downwards, lit towards +x with a
-# soft edge, nothing above (moirecast_render::frame::lateral_light)
+# the lateral lights: directions leaving downwards see plus_x towards +x and
+# minus_x towards -x, blended over a soft edge; nothing above
+# (moirecast_render::frame::Lighting::Lateral)
 world = bpy.data.worlds.new("lateral")
 scene.world = world
 world.use_nodes = True
@@ -59,13 +66,14 @@ below = wn.new("ShaderNodeMath")
 below.operation = "LESS_THAN"
 below.inputs[1].default_value = 0.0
 wl.new(xyz.outputs["Z"], below.inputs[0])
-lit = wn.new("ShaderNodeMath")
-lit.operation = "MULTIPLY"
-wl.new(ramp.outputs["Value"], lit.inputs[0])
-wl.new(below.outputs["Value"], lit.inputs[1])
+mix = wn.new("ShaderNodeMixRGB")
+mix.blend_type = "MIX"
+mix.inputs["Color1"].default_value = (*minus_x, 1)
+mix.inputs["Color2"].default_value = (*plus_x, 1)
+wl.new(ramp.outputs["Value"], mix.inputs["Fac"])
 bg = wn.new("ShaderNodeBackground")
-bg.inputs["Color"].default_value = (1, 1, 1, 1)
-wl.new(lit.outputs["Value"], bg.inputs["Strength"])
+wl.new(mix.outputs["Color"], bg.inputs["Color"])
+wl.new(below.outputs["Value"], bg.inputs["Strength"])
 w_out = wn.new("ShaderNodeOutputWorld")
 wl.new(bg.outputs["Background"], w_out.inputs["Surface"])
 
@@ -108,7 +116,7 @@ scene.render.threads = 2
 scene.render.resolution_x = scene.render.resolution_y = size
 scene.render.resolution_percentage = 100
 scene.render.image_settings.file_format = "PNG"
-scene.render.image_settings.color_mode = "BW"
+scene.render.image_settings.color_mode = "RGB"
 scene.render.image_settings.color_depth = "16"
 scene.display_settings.display_device = "None"  # linear values, as moirecast writes
 scene.view_settings.view_transform = "Standard"
@@ -122,11 +130,12 @@ for seed in (1, 2):
     times.append(time.perf_counter() - t)
 
 
-def gray(path):
+def rgb(path):
+    """Linear R, G, B planes, shape (3, h, w) (grey images give three equal planes)."""
     img = bpy.data.images.load(str(path))
     img.colorspace_settings.name = "Non-Color"
     px = np.array(img.pixels[:], dtype=np.float64).reshape(img.size[1], img.size[0], img.channels)
-    return px[::-1, :, 0]  # Blender's rows run bottom-up
+    return np.moveaxis(px[::-1, :, :3], 2, 0)  # Blender's rows run bottom-up
 
 
 def noise(a, b):
@@ -135,6 +144,8 @@ def noise(a, b):
 
 def box(img, k):
     """Mean over a k × k box (one lens period): the scale the moiré lives at."""
+    if img.ndim == 3:
+        return np.stack([box(plane, k) for plane in img])
     k = max(1, int(round(k)))
     c = np.cumsum(np.cumsum(np.pad(img, ((1, 0), (1, 0))), 0), 1)
     h, w = img.shape
@@ -145,11 +156,16 @@ def box(img, k):
     return s / np.outer(y1 - y0, x1 - x0)
 
 
-cycles = [gray(out / f"cycles-{s}.png") for s in (1, 2)]
+def luminance(planes):
+    """Mean Rec. 709 luminance of linear R, G, B planes."""
+    return float(np.tensordot([0.2126, 0.7152, 0.0722], planes, 1).mean())
+
+
+cycles = [rgb(out / f"cycles-{s}.png") for s in (1, 2)]
 ours = {}
 for d in sorted(out.glob("ours-*-1")):
     spp = int(d.name.split("-")[1])
-    a, b = gray(d / "frame-00.png"), gray(out / f"ours-{spp}-2" / "frame-00.png")
+    a, b = rgb(d / "frame-00.png"), rgb(out / f"ours-{spp}-2" / "frame-00.png")
     ms = [float(l.split()[-2]) for l in (d.parent / f"ours-{spp}-1.log").read_text().splitlines() if l.strip().startswith("rendering")]
     report = json.loads((d / "report.json").read_text())
     ours[spp] = dict(noise=noise(a, b), ms=ms[0], mean=(a + b) / 2, period_px=report["pixels_per_period"])
@@ -177,6 +193,7 @@ result = dict(
     time_ratio_cycles_over_ours=c_ms / ours_eq_ms,
     correlation=float(np.corrcoef(c_mean.ravel(), ours[best]["mean"].ravel())[0, 1]),
     correlation_one_period=float(np.corrcoef(box(c_mean, period).ravel(), box(ours[best]["mean"], period).ravel())[0, 1]),
-    mean_luminance=dict(cycles=float(c_mean.mean()), ours=float(ours[best]["mean"].mean())),
+    mean_luminance=dict(cycles=luminance(c_mean), ours=luminance(ours[best]["mean"])),
+    lights=dict(plus_x=plus_x, minus_x=minus_x),
 )
 print("COMPARISON " + json.dumps(result))
