@@ -198,15 +198,8 @@ mod tests {
         assert!(global < 0.3, "global {global}");
         assert!(local > 0.8, "local {local}");
         // brightness unrelated to the phase: white noise
-        let mut state = 7u64;
-        let noise: Vec<f64> = (0..w * h)
-            .map(|_| {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (state >> 11) as f64 / (1u64 << 53) as f64
-            })
-            .collect();
+        let mut rng = crate::trace::SplitMix64(7);
+        let noise: Vec<f64> = (0..w * h).map(|_| rng.next_f64()).collect();
         let by_chance = local_fidelity(&noise, &p, w, h, 1.0);
         eprintln!("noise {by_chance}");
         assert!(by_chance < 0.05, "noise {by_chance}");
