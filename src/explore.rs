@@ -101,66 +101,74 @@ pub fn run_explore(
     let base = &spec.design;
     let ds = base.standard.focal_depth;
     progress.stage("exploring (a, d)", (A_VALUES.len() * D_RATIOS.len()) as u64);
-    let mut cells = Vec::new();
     let lighting = options.lights.lighting(base)?;
-    let mut frames: Vec<(Rgb8, String)> = Vec::new();
     let blank = Rgb8 {
         width: options.size,
         height: options.size,
         pixels: vec![[128; 3]; options.size * options.size],
     };
-    for &ratio in &D_RATIOS {
-        for &a in &A_VALUES {
-            let mut params = base.params.clone();
-            params.base.a = a;
-            params.base.d = Some(ratio * ds);
-            let label = format!("{a:.2} {ratio:.1}");
-            let cell = match Design::new(params) {
-                Err(e) => {
-                    frames.push((blank.clone(), label));
-                    Cell {
-                        a,
-                        d_over_ds: ratio,
-                        d_mm: ratio * ds,
-                        fidelity: None,
-                        local_fidelity: None,
-                        best_tilt_deg: None,
-                        invalid: Some(e.to_string()),
-                    }
-                }
-                Ok(design) => {
-                    let dm = mesh_device(&design, &Silent).context("meshing a cell")?;
-                    // (local fidelity, tilt, frame) of the best tilt
-                    let mut best: Option<(f64, f64, Rgb8)> = None;
-                    let (mesh, absorbing) =
-                        traced_mesh(&design, &dm).context("building a cell's traced bodies")?;
-                    let scene = Scene::with_absorbing(&mesh, absorbing);
-                    let mut fid = 0.0f64;
-                    for &tilt in &options.tilts_deg {
-                        let (f, global) = render_scored(base, &scene, options.view(tilt, lighting));
-                        fid = fid.max(global);
-                        let local = f.local_fidelity();
-                        if best.as_ref().is_none_or(|b| local > b.0) {
-                            best = Some((local, tilt, to_rgb8(f.width, f.height, &f.rgb)));
-                        }
-                    }
-                    let (local, tilt, image) = best.context("at least one tilt")?;
-                    frames.push((image, label));
-                    Cell {
-                        a,
-                        d_over_ds: ratio,
-                        d_mm: ratio * ds,
-                        fidelity: Some(fid),
-                        local_fidelity: Some(local),
-                        best_tilt_deg: Some(tilt),
-                        invalid: None,
-                    }
-                }
-            };
-            cells.push(cell);
-            progress.tick(1);
+    // One cell: its scores and its best frame, labelled.
+    let explore_cell = |ratio: f64, a: f64| -> Result<(Cell, (Rgb8, String))> {
+        let mut params = base.params.clone();
+        params.base.a = a;
+        params.base.d = Some(ratio * ds);
+        let label = format!("{a:.2} {ratio:.1}");
+        let cell = |fidelity, local_fidelity, best_tilt_deg, invalid| Cell {
+            a,
+            d_over_ds: ratio,
+            d_mm: ratio * ds,
+            fidelity,
+            local_fidelity,
+            best_tilt_deg,
+            invalid,
+        };
+        let design = match Design::new(params) {
+            Err(e) => {
+                return Ok((
+                    cell(None, None, None, Some(e.to_string())),
+                    (blank.clone(), label),
+                ))
+            }
+            Ok(design) => design,
+        };
+        let dm = mesh_device(&design, &Silent).context("meshing a cell")?;
+        let (mesh, absorbing) =
+            traced_mesh(&design, &dm).context("building a cell's traced bodies")?;
+        let scene = Scene::with_absorbing(&mesh, absorbing);
+        // (local fidelity, tilt, frame) of the best tilt, and the best fidelity
+        let mut best: Option<(f64, f64, Rgb8)> = None;
+        let mut fid = 0.0f64;
+        for &tilt in &options.tilts_deg {
+            let (f, global) = render_scored(base, &scene, options.view(tilt, lighting));
+            fid = fid.max(global);
+            let local = f.local_fidelity();
+            if best.as_ref().is_none_or(|b| local > b.0) {
+                best = Some((local, tilt, to_rgb8(f.width, f.height, &f.rgb)));
+            }
         }
-    }
+        let (local, tilt, image) = best.context("at least one tilt")?;
+        Ok((
+            cell(Some(fid), Some(local), Some(tilt), None),
+            (image, label),
+        ))
+    };
+    // Cells in parallel: meshing a cell and building its BVH are partly
+    // serial, so one cell at a time left a core idle. Row-major order.
+    use rayon::prelude::*;
+    let grid: Vec<(f64, f64)> = D_RATIOS
+        .iter()
+        .flat_map(|&ratio| A_VALUES.iter().map(move |&a| (ratio, a)))
+        .collect();
+    let (cells, frames): (Vec<Cell>, Vec<(Rgb8, String)>) = grid
+        .into_par_iter()
+        .map(|(ratio, a)| {
+            let cell = explore_cell(ratio, a);
+            progress.tick(1);
+            cell
+        })
+        .collect::<Result<Vec<_>>>()?
+        .into_iter()
+        .unzip();
     let best = (0..cells.len())
         .filter(|&i| cells[i].local_fidelity.is_some())
         .fold(None, |b: Option<usize>, i| match b {

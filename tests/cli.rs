@@ -30,11 +30,30 @@ sigma = 1.5
 tolerance = 0.004
 "#;
 
-fn scratch(name: &str) -> PathBuf {
+/// A fresh directory for one test, removed when the test passes (kept for
+/// a look when it fails).
+struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
+fn scratch(name: &str) -> Scratch {
     let dir = std::env::temp_dir().join(format!("moirecast-cli-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    dir
+    Scratch(dir)
 }
 
 fn run(spec_text: &str, dir: &Path) -> (bool, String, PathBuf) {
@@ -309,7 +328,8 @@ fn render_writes_frames_sheet_gif_and_fidelity_deterministically() {
     let mut along = args.to_vec();
     along.push("--tilt-along=-8");
     along.push("--camera-distance=200");
-    let (ok, err, out_c) = run_with(&along, SMALL, &scratch("render-along"));
+    let dir_c = scratch("render-along");
+    let (ok, err, out_c) = run_with(&along, SMALL, &dir_c);
     assert!(ok, "{err}");
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out_c.join("report.json")).unwrap()).unwrap();
@@ -342,12 +362,14 @@ fn render_writes_frames_sheet_gif_and_fidelity_deterministically() {
         .contains("#FF9926 towards +x, #2673FF towards -x"));
     let mut white = args.to_vec();
     white.push("--lights=white");
-    let (ok, err, out_w) = run_with(&white, SMALL, &scratch("render-white"));
+    let dir_w = scratch("render-white");
+    let (ok, err, out_w) = run_with(&white, SMALL, &dir_w);
     assert!(ok, "{err}");
     assert!(rgb(&out_w).iter().all(|p| p[0] == p[1] && p[1] == p[2]));
     let mut custom = args.to_vec();
     custom.push("--lights=#00FF00,#FF00FF");
-    let (ok, err, out_g) = run_with(&custom, SMALL, &scratch("render-custom"));
+    let dir_g = scratch("render-custom");
+    let (ok, err, out_g) = run_with(&custom, SMALL, &dir_g);
     assert!(ok, "{err}");
     assert!(rgb(&out_g).iter().any(|p| p[1] > 200 && p[0] < 50));
     // a bad option is refused before anything is built
@@ -358,7 +380,8 @@ fn render_writes_frames_sheet_gif_and_fidelity_deterministically() {
         "--lights=#12345",
         "--lights=#FFFFFF",
     ] {
-        let (ok, err, out) = run_with(&["render", bad], SMALL, &scratch("render-bad"));
+        let dir = scratch("render-bad");
+        let (ok, err, out) = run_with(&["render", bad], SMALL, &dir);
         assert!(
             !ok && err.contains(&bad[..bad.find('=').unwrap()]) && !out.exists(),
             "{err}"
