@@ -218,7 +218,7 @@ const TILE: usize = 8;
 /// One frame of `scene` (the device's mesh, built once and shared by every
 /// frame of it); `design` gives the index and the elevation phase.
 pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
-    let (lo, hi) = scene.mesh().bounds();
+    let (lo, hi) = scene.bounds();
     let rot = DMat3::from_rotation_y(view.tilt_across) * DMat3::from_rotation_x(view.tilt_along);
     let dir = rot * DVec3::NEG_Z;
     let (du, dv) = (rot * DVec3::X, rot * DVec3::Y);
@@ -240,47 +240,48 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
     // the stratum whose sample gives the pixel its phase: the central one
     let central = (n / 2) * n + n / 2;
     let (width, height) = (view.width, view.height);
-    let tiles_x = width.div_ceil(TILE);
-    let tiles = tiles_x * height.div_ceil(TILE);
-    let traced: Vec<(usize, DVec3, f64)> = (0..tiles * TILE * TILE)
-        .into_par_iter()
-        .filter_map(|i| {
-            let (tile, k) = (i / (TILE * TILE), i % (TILE * TILE));
-            let px = (tile % tiles_x) * TILE + k % TILE;
-            let py = (tile / tiles_x) * TILE + k / TILE;
-            (px < width && py < height).then_some((px, py))
-        })
-        .map(|(px, py)| {
-            let p = py * width + px;
-            let mut rng = SplitMix64(view.seed ^ (p as u64).wrapping_mul(0x2545_F491_4F6C_DD1D));
-            let (mut sum, mut phase) = (DVec3::ZERO, f64::NAN);
-            for s in 0..n * n {
-                let (sx, sy) = (s % n, s / n);
-                let fx = (px as f64 + (sx as f64 + rng.next_f64()) / n as f64) / width as f64 - 0.5;
-                let fy =
-                    0.5 - (py as f64 + (sy as f64 + rng.next_f64()) / n as f64) / height as f64;
-                let target =
-                    centre + du * (fx * pixel * width as f64) + dv * (fy * pixel * height as f64);
-                let (origin, d) = ray(target);
-                let end = trace_path(scene, design.params.lens.index, origin, d, &mut rng);
-                sum += end.leaves.map_or(DVec3::ZERO, |l| lighting.colour(l));
-                if s == central {
-                    // the layout point this sample sees first, if on the device's top
-                    if let Some((q, _)) = end.first.filter(|(_, nrm)| nrm.z > 0.0) {
-                        let (u, v) = layout_of(design, q.x, q.y);
-                        phase = (levels * design.params.profile.value(u, v)).rem_euclid(1.0);
+    // the colour and phase of pixel (px, py)
+    let pixel_of = |px: usize, py: usize| -> (DVec3, f64) {
+        let p = py * width + px;
+        let mut rng = SplitMix64(view.seed ^ (p as u64).wrapping_mul(0x2545_F491_4F6C_DD1D));
+        let (mut sum, mut phase) = (DVec3::ZERO, f64::NAN);
+        for s in 0..n * n {
+            let (sx, sy) = (s % n, s / n);
+            let fx = (px as f64 + (sx as f64 + rng.next_f64()) / n as f64) / width as f64 - 0.5;
+            let fy = 0.5 - (py as f64 + (sy as f64 + rng.next_f64()) / n as f64) / height as f64;
+            let target =
+                centre + du * (fx * pixel * width as f64) + dv * (fy * pixel * height as f64);
+            let (origin, d) = ray(target);
+            let end = trace_path(scene, design.params.lens.index, origin, d, &mut rng);
+            sum += end.leaves.map_or(DVec3::ZERO, |l| lighting.colour(l));
+            if s == central {
+                // the layout point this sample sees first, if on the device's top
+                if let Some((q, _)) = end.first.filter(|(_, nrm)| nrm.z > 0.0) {
+                    let (u, v) = layout_of(design, q.x, q.y);
+                    phase = (levels * design.params.profile.value(u, v)).rem_euclid(1.0);
+                }
+            }
+        }
+        (sum / (n * n) as f64, phase)
+    };
+    let mut rgb = vec![DVec3::ZERO; width * height];
+    let mut phase = vec![f64::NAN; width * height];
+    // bands of TILE rows in parallel, each traced tile by tile, written in place
+    rgb.par_chunks_mut((width * TILE).max(1))
+        .zip(phase.par_chunks_mut((width * TILE).max(1)))
+        .enumerate()
+        .for_each(|(band, (rgb, phase))| {
+            let rows = rgb.len() / width.max(1);
+            for x0 in (0..width).step_by(TILE) {
+                for y in 0..rows {
+                    for px in x0..(x0 + TILE).min(width) {
+                        let (c, ph) = pixel_of(px, band * TILE + y);
+                        rgb[y * width + px] = c;
+                        phase[y * width + px] = ph;
                     }
                 }
             }
-            (p, sum / (n * n) as f64, phase)
-        })
-        .collect();
-    let mut rgb = vec![DVec3::ZERO; width * height];
-    let mut phase = vec![f64::NAN; width * height];
-    for (p, c, ph) in traced {
-        rgb[p] = c;
-        phase[p] = ph;
-    }
+        });
     Frame {
         width,
         height,

@@ -49,6 +49,8 @@ pub struct Scene<'m> {
     /// Per triangle: it absorbs every ray that reaches it (a printed
     /// device's black bands). Empty: every face is a dielectric interface.
     absorbing: Vec<bool>,
+    /// The mesh's bounding box, (lowest, highest) corner.
+    bounds: (DVec3, DVec3),
 }
 
 impl<'m> Scene<'m> {
@@ -75,7 +77,7 @@ impl<'m> Scene<'m> {
             .triangles
             .iter()
             .map(|t| {
-                let [a, b, c] = t.map(|i| mesh.positions[i as usize].as_vec3a());
+                let [a, b, c] = t.map(|i| mesh.positions[i as usize].to_vec3a());
                 Triangle {
                     v0: a,
                     v1: b,
@@ -107,7 +109,13 @@ impl<'m> Scene<'m> {
             bvh,
             corners,
             absorbing: Vec::new(),
+            bounds: mesh.bounds(),
         }
+    }
+
+    /// The mesh's bounding box, (lowest, highest) corner.
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        self.bounds
     }
 
     /// The mesh the scene was built over.
@@ -122,8 +130,8 @@ impl<'m> Scene<'m> {
         // bits and the slab inverses from signum, which disagree on −0.0
         // (a ray straight down −z missed every triangle).
         let ray = Ray::new(
-            origin.as_vec3a(),
-            dir.as_vec3a() + Vec3A::ZERO,
+            origin.to_vec3a(),
+            dir.to_vec3a() + Vec3A::ZERO,
             0.0,
             f32::INFINITY,
         );
@@ -223,12 +231,12 @@ pub fn watertight(corners: &[DVec3; 3], origin: DVec3, dir: DVec3) -> Option<f64
     ShearedRay::new(origin, dir).intersect(corners)
 }
 
-trait AsVec3A {
-    fn as_vec3a(self) -> Vec3A;
+trait ToVec3A {
+    fn to_vec3a(self) -> Vec3A;
 }
 
-impl AsVec3A for DVec3 {
-    fn as_vec3a(self) -> Vec3A {
+impl ToVec3A for DVec3 {
+    fn to_vec3a(self) -> Vec3A {
         Vec3A::new(self.x as f32, self.y as f32, self.z as f32)
     }
 }
