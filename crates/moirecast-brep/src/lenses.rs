@@ -1,8 +1,12 @@
-//! One NURBS surface per lens (METHOD §2, §5.1).
+//! One NURBS surface per lens (METHOD §2, §5.1), or per band span of a
+//! printed base (METHOD §5.2).
 //!
 //! **Across** a lens (parameter t ∈ [0, 1]) every station's section is the
 //! exact arc as a rational quadratic: ends P0 and P1 with weight 1, and the
-//! tangents' intersection M + (w/2)·tan β·m with weight cos β.
+//! tangents' intersection M + (w/2)·tan β·m with weight cos β. Across a band
+//! span of s (between two band edges) it is the quadratic through the span's
+//! ends and its exact middle point (s is no conic, so the quadratic is
+//! measured against s like every other approximation here).
 //! **Along** a lens (parameter v, the station) the homogeneous control points
 //! are interpolated by clamped C² cubics through shared stations, so at every
 //! station the section *is* the exact arc, and neighbouring lenses share
@@ -14,8 +18,10 @@
 
 use crate::error::BrepError;
 use crate::spline::{clamped_knots, interpolate};
+use glam::DVec3;
 use moirecast_kernel::lens::LensArc;
-use moirecast_kernel::Design;
+use moirecast_kernel::model::BaseSection;
+use moirecast_kernel::{BaseKind, Design};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use truck_modeling::{BSplineSurface, KnotVec, NurbsSurface, Point3, Vector4};
@@ -41,6 +47,40 @@ fn section(arc: &LensArc) -> Section {
         [w * mid.x, w * mid.y, w * mid.z, w],
         [arc.p1.x, arc.p1.y, arc.p1.z, 1.0],
     ]
+}
+
+/// The exact section of one lens, or of one band span, at one station.
+#[derive(Clone, Copy, Debug)]
+pub enum ExactSection<'a> {
+    /// A lens: its circular arc.
+    Arc(LensArc),
+    /// A printed base's span of s between two band edges.
+    Span(BaseSection<'a>),
+}
+
+impl ExactSection<'_> {
+    /// Homogeneous control points across: the exact arc, or the quadratic
+    /// through the span's ends and its point at t = 1/2.
+    fn section(&self) -> Section {
+        match self {
+            ExactSection::Arc(arc) => section(arc),
+            ExactSection::Span(span) => {
+                let (p0, mid, p1) = (span.point(0.0), span.point(0.5), span.point(1.0));
+                let m = 2.0 * mid - 0.5 * (p0 + p1);
+                [p0, m, p1].map(|p| [p.x, p.y, p.z, 1.0])
+            }
+        }
+    }
+
+    /// Distance (mm) from `q`, a surface's point at across-parameter `t`, to
+    /// the exact section: to the arc; for a span, to its point at the same
+    /// t (an upper bound of the distance to the span).
+    fn distance(&self, t: f64, q: DVec3) -> f64 {
+        match self {
+            ExactSection::Arc(arc) => distance_to_arc(arc, q),
+            ExactSection::Span(span) => (q - span.point(t)).length(),
+        }
+    }
 }
 
 /// Distance (mm) from `q` to the exact arc: to its circle within the arc's
@@ -109,9 +149,9 @@ impl LensFamily {
                 .map(|s| {
                     lenses.iter().enumerate().any(|(l, k)| {
                         let arc = &arcs[l][s];
-                        REFINE_T.iter().any(|&t| {
-                            distance_to_arc(arc, glam_of(surfaces[k].subs(t, mids[s]))) > fit
-                        })
+                        REFINE_T
+                            .iter()
+                            .any(|&t| arc.distance(t, glam_of(surfaces[k].subs(t, mids[s]))) > fit)
                     })
                 })
                 .collect();
@@ -162,13 +202,20 @@ struct ExactSections<'a> {
 
 impl ExactSections<'_> {
     /// arcs[lens position][station]
-    fn arcs_at(&self, lenses: &[i64], stations: &[f64]) -> Result<Vec<Vec<LensArc>>, BrepError> {
+    fn arcs_at<'d>(
+        &'d self,
+        lenses: &[i64],
+        stations: &[f64],
+    ) -> Result<Vec<Vec<ExactSection<'d>>>, BrepError> {
         let d = self.design;
-        let per_station: Vec<Vec<LensArc>> = stations
+        let per_station: Vec<Vec<ExactSection>> = stations
             .par_iter()
-            .map(|&v| -> Result<Vec<LensArc>, BrepError> {
+            .map(|&v| -> Result<Vec<ExactSection>, BrepError> {
                 match self.array {
-                    Array::Revealer => Ok(lenses.iter().map(|&i| d.revealer_arc(i, v)).collect()),
+                    Array::Revealer => Ok(lenses
+                        .iter()
+                        .map(|&i| ExactSection::Arc(d.revealer_arc(i, v)))
+                        .collect()),
                     Array::Base => {
                         let mut creases = BTreeMap::new();
                         let mut near = None;
@@ -178,14 +225,28 @@ impl ExactSections<'_> {
                                     creases.entry(c)
                                 {
                                     let u = d.base_crease_u_near(c, v, near)?;
-                                    near = Some(u + d.params.period);
+                                    let step = d.crease_phase(c + 1) - d.crease_phase(c);
+                                    near = Some(u + step * d.params.period);
                                     e.insert(u);
                                 }
                             }
                         }
                         Ok(lenses
                             .iter()
-                            .map(|&k| d.base_arc_between(creases[&k], creases[&(k + 1)], v))
+                            .map(|&k| {
+                                let (u0, u1) = (creases[&k], creases[&(k + 1)]);
+                                match d.params.base.kind {
+                                    BaseKind::DualLens => {
+                                        ExactSection::Arc(d.base_arc_between(u0, u1, v))
+                                    }
+                                    BaseKind::Printed(_) => ExactSection::Span(BaseSection::Band {
+                                        design: d,
+                                        u0,
+                                        u1,
+                                        v,
+                                    }),
+                                }
+                            })
                             .collect())
                     }
                 }
@@ -201,7 +262,7 @@ impl ExactSections<'_> {
         Ok(self
             .arcs_at(lenses, stations)?
             .iter()
-            .map(|arcs| arcs.iter().map(section).collect())
+            .map(|arcs| arcs.iter().map(ExactSection::section).collect())
             .collect())
     }
 }
@@ -280,7 +341,7 @@ fn verify(
             let mut worst = (0.0f64, k, 0.0, 0.0);
             for (s, &v) in sample_v.iter().enumerate() {
                 for t in VERIFY_T {
-                    let d = distance_to_arc(&arcs[l][s], glam_of(surfaces[&k].subs(t, v)));
+                    let d = arcs[l][s].distance(t, glam_of(surfaces[&k].subs(t, v)));
                     if d > worst.0 {
                         worst = (d, k, t, v);
                     }
