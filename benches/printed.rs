@@ -27,6 +27,7 @@ fn main() {
     let (mut total, mut load, mut build_t, mut bodies_t, mut printed_t, mut solid_t) =
         (vec![], vec![], vec![], vec![], vec![], vec![]);
     let (mut stl_t, mut threemf_t) = (vec![], vec![]);
+    let (mut brep_t, mut step_t) = (vec![], vec![]);
     let mut triangles = 0;
     for _ in 0..runs {
         let t0 = Instant::now();
@@ -74,6 +75,14 @@ fn main() {
         ];
         std::hint::black_box(moirecast_export::threemf_bytes("device.3mf", &objects).unwrap());
         let t9 = Instant::now();
+        let brep =
+            moirecast_brep::build_printed_brep(&spec.design, &build.mesh, &printed.bodies).unwrap();
+        let t10 = Instant::now();
+        std::hint::black_box(moirecast_brep::step_text(&brep.clear, "clear", ""));
+        std::hint::black_box(moirecast_brep::step_text_of(&brep.bands, "black", ""));
+        let t11 = Instant::now();
+        brep_t.push((t10 - t9).as_secs_f64());
+        step_t.push((t11 - t10).as_secs_f64());
         stl_t.push((t8 - t7).as_secs_f64());
         threemf_t.push((t9 - t8).as_secs_f64());
         build_t.push((t4 - t3).as_secs_f64());
@@ -92,6 +101,8 @@ fn main() {
     println!("  solid checks    {:8.1} ms", ms(solid_t));
     println!("  STL encoding    {:8.1} ms", ms(stl_t));
     println!("  3MF encoding    {:8.1} ms", ms(threemf_t));
+    println!("  B-rep           {:8.1} ms", ms(brep_t));
+    println!("  STEP text       {:8.1} ms", ms(step_t));
     println!("  (the rest of spec to files: the device mesh's solid checks, the report, writing)");
     let _ = std::fs::remove_dir_all(&out);
 }

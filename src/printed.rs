@@ -50,6 +50,19 @@ pub struct PrintedReport {
     /// most the tolerance).
     pub wall_touches: usize,
     pub wall_touch_shift_mm: f64,
+    /// The bodies as B-rep solids in `device-clear.step` and
+    /// `device-black.step` (once written).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub brep: Option<PrintedBrepReport>,
+}
+
+/// The printed bodies' B-rep and STEP files.
+#[derive(Serialize, Clone, Debug)]
+pub struct PrintedBrepReport {
+    pub clear_step_bytes: usize,
+    pub black_step_bytes: usize,
+    #[serde(flatten)]
+    pub stats: moirecast_brep::PrintedBrepStats,
 }
 
 /// The duty cycle, asked and measured two ways on the output. These are
@@ -175,6 +188,7 @@ pub fn build_printed(design: &Design, build: &DeviceBuild) -> Result<PrintedBuil
         },
         wall_touches: bodies.wall_touches.touches,
         wall_touch_shift_mm: bodies.wall_touches.max_shift_mm,
+        brep: None,
     };
     Ok(PrintedBuild {
         bodies,
@@ -200,36 +214,60 @@ pub(crate) fn write_printed_device(
     refuse_failed(&checks)?;
     let [clear, black] = solids.context("the printed bodies passed their solid checks")?;
     progress.tick(1);
-    progress.stage("writing", 1);
+    progress.stage("B-rep, STEP and writing", 1);
     let b = &printed.bodies;
     let mut files = OutputSet::new();
     let mut reports = std::collections::BTreeMap::new();
     let stls = [("device-clear.stl", clear), ("device-black.stl", black)];
-    // both encoded at once: stl_io writes one triangle at a time
-    let (clear_stl, black_stl) = rayon::join(
-        || stl_bytes(stls[0].0, stls[0].1),
-        || stl_bytes(stls[1].0, stls[1].1),
+    // the B-rep and STEP alongside the meshes' encodings (both STLs at
+    // once: stl_io writes one triangle at a time)
+    let (step, ((clear_stl, black_stl), threemf)) = rayon::join(
+        || moirecast_brep::printed_step(&spec.design, &build.mesh, b),
+        || {
+            rayon::join(
+                || {
+                    rayon::join(
+                        || stl_bytes(stls[0].0, stls[0].1),
+                        || stl_bytes(stls[1].0, stls[1].1),
+                    )
+                },
+                || {
+                    threemf_bytes(
+                        "device.3mf",
+                        &[
+                            Object {
+                                name: "clear",
+                                solid: clear,
+                                material: CLEAR,
+                            },
+                            Object {
+                                name: "black",
+                                solid: black,
+                                material: BLACK,
+                            },
+                        ],
+                    )
+                },
+            )
+        },
     );
+    let step = step.context("building the printed bodies' B-rep")?;
+    refuse_failed(&step.checks)?;
+    checks.extend(step.checks.iter().cloned());
     for ((name, solid), bytes) in stls.into_iter().zip([clear_stl?, black_stl?]) {
         reports.insert(name.to_string(), FileReport::of(solid.mesh(), bytes.len()));
         files.add(name, bytes);
     }
-    let threemf = threemf_bytes(
-        "device.3mf",
-        &[
-            Object {
-                name: "clear",
-                solid: clear,
-                material: CLEAR,
-            },
-            Object {
-                name: "black",
-                solid: black,
-                material: BLACK,
-            },
-        ],
-    )?;
+    let threemf = threemf?;
     files.add("device.3mf", threemf);
+    let mut printed_report = printed.report.clone();
+    printed_report.brep = Some(PrintedBrepReport {
+        clear_step_bytes: step.clear_step.len(),
+        black_step_bytes: step.black_step.len(),
+        stats: step.brep.stats.clone(),
+    });
+    files.add("device-clear.step", step.clear_step.into_bytes());
+    files.add("device-black.step", step.black_step.into_bytes());
     let report = report::device_report(
         spec,
         build,
@@ -237,7 +275,7 @@ pub(crate) fn write_printed_device(
         report::DeviceOutputs {
             files: reports,
             step: None,
-            printed: Some(printed.report.clone()),
+            printed: Some(printed_report),
             crosscheck: None,
         },
     );

@@ -152,7 +152,7 @@ fn small_printed() -> String {
 }
 
 #[test]
-fn a_printed_design_writes_two_bodies_and_a_3mf() {
+fn a_printed_design_writes_two_bodies_a_3mf_and_their_step_files() {
     let dir = scratch("printed");
     let (ok, err, out) = run(&small_printed(), &dir);
     assert!(ok, "{err}");
@@ -164,7 +164,9 @@ fn a_printed_design_writes_two_bodies_and_a_3mf() {
     assert_eq!(
         names,
         [
+            "device-black.step",
             "device-black.stl",
+            "device-clear.step",
             "device-clear.stl",
             "device.3mf",
             "report.json"
@@ -203,6 +205,23 @@ fn a_printed_design_writes_two_bodies_and_a_3mf() {
     }
     let threemf = std::fs::read(out.join("device.3mf")).unwrap();
     assert!(threemf.starts_with(b"PK\x03\x04"), "a zip package");
+    // the bodies' B-rep: one clear solid, one solid per band
+    let brep = &p["brep"];
+    assert_eq!(brep["black_solids"], p["bands"], "{brep}");
+    assert_eq!(brep["clear_genus"], p["clear_genus"], "{brep}");
+    for (f, key) in [
+        ("device-clear.step", "clear_step_bytes"),
+        ("device-black.step", "black_step_bytes"),
+    ] {
+        let step = std::fs::read_to_string(out.join(f)).unwrap();
+        assert_eq!(brep[key].as_u64().unwrap() as usize, step.len(), "{f}");
+        assert!(step.starts_with("ISO-10303-21;") && step.ends_with("END-ISO-10303-21;\n"));
+    }
+    assert!(report["checks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|c| c["name"] == "brep-surface-fit"));
     // byte-identical on a second run
     let again = scratch("printed-again");
     let (ok, err, out2) = run(&small_printed(), &again);

@@ -139,3 +139,29 @@ def test_lib3mf_reads_two_objects_with_their_materials(spec, printed):
         assert len(o["tris"]) == report["files"][stl]["triangles"]
         # the same f32 vertices as the STL: the same volume
         assert volume(o["verts"], o["tris"]) == pytest.approx(report["files"][stl]["volume_mm3"], rel=1e-6)
+
+
+@pytest.mark.parametrize("spec", PRINTED_SPECS, ids=IDS)
+def test_opencascade_reads_the_bodies_step_files(spec, printed):
+    """device-clear.step is one valid solid, device-black.step one valid
+    solid per band, with the faces report.json counts; each file's volume
+    is its STL's to within the STL's surface area × tolerance (the STL's
+    triangles are chords of the exact faces, within the tolerance)."""
+    from test_step_oracles import read_step
+
+    trimesh = oracle("trimesh")
+    out, report = printed(spec)
+    brep = report["printed"]["brep"]
+    tol = report["design"]["tolerance_mm"]
+    expected = {
+        "device-clear": (1, brep["clear_faces"]),
+        "device-black": (report["printed"]["bands"], brep["black_faces"]),
+    }
+    for name, (solids, faces) in expected.items():
+        step = read_step(out / f"{name}.step")
+        assert step["solids"] == solids, name
+        assert step["faces"] == faces, name
+        assert step["valid"], f"BRepCheck_Analyzer finds {name}.step invalid"
+        mesh = trimesh.load(str(out / f"{name}.stl"), process=False)
+        v_stl = report["files"][f"{name}.stl"]["volume_mm3"]
+        assert abs(step["volume"] - v_stl) <= mesh.area * tol, (name, step["volume"], v_stl)

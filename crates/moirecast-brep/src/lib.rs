@@ -9,6 +9,7 @@
 pub mod crosscheck;
 pub mod error;
 pub mod lenses;
+pub mod printed;
 pub mod solid;
 pub mod spline;
 pub mod step;
@@ -16,11 +17,13 @@ pub mod topology;
 
 pub use crosscheck::{compare, tessellate, verdicts, CrossCheck};
 pub use error::BrepError;
+pub use printed::{build_printed_brep, PrintedBrep, PrintedBrepStats};
 pub use solid::{build_brep, BrepStats, DeviceBrep};
-pub use step::{read_back_faces, step_text};
+pub use step::{read_back_faces, step_text, step_text_of};
 
 use moirecast_kernel::check::CheckResult;
 use moirecast_kernel::mesher::DeviceMesh;
+use moirecast_kernel::printed::PrintedBodies;
 use moirecast_kernel::Design;
 
 /// The device's B-rep, its STEP text and the check of its faces.
@@ -47,15 +50,75 @@ pub fn device_step(
         "moirecast device: level-line moire lens arrays",
     );
     let s = &brep.stats;
-    let checks = vec![CheckResult::at_most(
-        "brep-surface-fit",
+    let checks = vec![surface_fit_check(
+        design,
         s.max_surface_deviation_mm,
+        &s.worst_surface,
+        s.surface_fit_mm,
+    )];
+    Ok(DeviceStep { brep, step, checks })
+}
+
+/// The B-rep solids of a printed device's two bodies and their STEP texts.
+pub struct PrintedStep {
+    pub brep: PrintedBrep,
+    /// `device-clear.step`: the clear body.
+    pub clear_step: String,
+    /// `device-black.step`: one solid per black band.
+    pub black_step: String,
+    /// `brep-surface-fit`, with its evidence.
+    pub checks: Vec<CheckResult>,
+}
+
+/// Builds the B-rep of a printed design's bodies (meshed as `dm`, its
+/// bodies `bodies`) and writes them as two STEP texts.
+pub fn printed_step(
+    design: &Design,
+    dm: &DeviceMesh,
+    bodies: &PrintedBodies,
+) -> Result<PrintedStep, BrepError> {
+    let brep = build_printed_brep(design, dm, bodies)?;
+    let (clear_step, black_step) = rayon::join(
+        || {
+            step_text(
+                &brep.clear,
+                "device-clear.step",
+                "moirecast printed device: the clear body (lenses and backing)",
+            )
+        },
+        || {
+            step_text_of(
+                &brep.bands,
+                "device-black.step",
+                "moirecast printed device: the black bands, one solid each",
+            )
+        },
+    );
+    let s = &brep.stats;
+    let checks = vec![surface_fit_check(
+        design,
+        s.max_surface_deviation_mm,
+        &s.worst_surface,
+        s.surface_fit_mm,
+    )];
+    Ok(PrintedStep {
+        brep,
+        clear_step,
+        black_step,
+        checks,
+    })
+}
+
+/// `brep-surface-fit`: the worst sampled distance (mm) of a lens or band
+/// face from its exact section, `worst` saying where, within the tolerance.
+fn surface_fit_check(design: &Design, deviation: f64, worst: &str, fit_mm: f64) -> CheckResult {
+    CheckResult::at_most(
+        "brep-surface-fit",
+        deviation,
         design.tolerance.mm(),
         "mm",
         format!(
-            "worst sampled distance of a lens face from its exact lens, {}; stations refined to {} mm",
-            s.worst_surface, s.surface_fit_mm
+            "worst sampled distance of a lens or band face from its exact section, {worst}; stations refined to {fit_mm} mm"
         ),
-    )];
-    Ok(DeviceStep { brep, step, checks })
+    )
 }

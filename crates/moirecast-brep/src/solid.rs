@@ -109,12 +109,79 @@ fn family_key(lens: LensRef) -> (Array, i64) {
 /// `FIT_SHARE × tolerance` of its exact lens at every sampled point, or this
 /// fails with [`BrepError::SurfaceFit`].
 pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepError> {
+    let pieces = pieces(&dm.mesh, &dm.patches)?;
+    let (revealer, base) = lens_families(design, dm, &pieces)?;
+    let surface_of = |lens: LensRef| match lens {
+        LensRef::Revealer(i) => &revealer.surfaces[&i],
+        LensRef::Base(k) => &base.surfaces[&k],
+    };
+
+    let assembled = assemble(
+        &pieces,
+        &dm.mesh.positions,
+        |piece| lens_of(piece.patch).is_none(),
+        |piece, other, run| edge_curve(design, dm, piece, other, run, &surface_of),
+        |piece, wires| make_face(design, dm, piece, wires, &surface_of),
+    )?;
+    let shell: Shell = assembled.faces.into();
+    let (edge_count, vertex_count) = (assembled.edges, assembled.vertices);
+    let condition = shell.shell_condition();
+    if condition != ShellCondition::Closed {
+        return Err(BrepError::Truck {
+            what: "shell",
+            detail: format!("shell condition is {condition:?}, not Closed"),
+        });
+    }
+    let solid = Solid::try_new(vec![shell]).map_err(|e| BrepError::Truck {
+        what: "solid",
+        detail: e.to_string(),
+    })?;
+
+    let count = |f: &dyn Fn(&Piece) -> bool| pieces.iter().filter(|p| f(p)).count();
+    let base_lenses = base.surfaces.len();
+    let (deviation, worst) = [(&revealer, "revealer"), (&base, "base")]
+        .iter()
+        .map(|(f, name)| {
+            let (d, k, t, v) = f.deviation;
+            (d, format!("{name} lens {k} at t = {t:.2}, v = {v:.3} mm"))
+        })
+        .fold((0.0, String::new()), |a, b| if b.0 > a.0 { b } else { a });
+    let stats = BrepStats {
+        faces: pieces.len(),
+        revealer_faces: count(&|p| matches!(p.patch, Patch::Lens(LensRef::Revealer(_)))),
+        base_faces: count(&|p| matches!(p.patch, Patch::Lens(LensRef::Base(_)))),
+        base_lenses,
+        wall_faces: count(&|p| matches!(p.patch, Patch::Wall(_))),
+        edges: edge_count,
+        vertices: vertex_count,
+        revealer_stations: revealer.stations.len(),
+        base_stations: base.stations.len(),
+        max_surface_deviation_mm: deviation,
+        worst_surface: worst,
+        surface_fit_mm: FIT_SHARE * design.tolerance.mm(),
+    };
+    Ok(DeviceBrep {
+        solid,
+        stats,
+        revealer,
+        base,
+    })
+}
+
+/// The lens surfaces of both arrays (for a printed design, the base's are
+/// its band spans of s), over the stations the faces of `pieces` (the
+/// device mesh's) span, each within `FIT_SHARE × tolerance` of the exact
+/// sections at every sampled point, or [`BrepError::SurfaceFit`].
+pub fn lens_families(
+    design: &Design,
+    dm: &DeviceMesh,
+    pieces: &[Piece],
+) -> Result<(LensFamily, LensFamily), BrepError> {
     let tolerance: Tolerance = design.tolerance;
-    let pieces = pieces(dm)?;
     // lenses with faces, and the station range their faces span (a
     // coordinate of the parameter plane is extreme on a face's boundary)
     let mut ranges: BTreeMap<(u8, i64), (f64, f64)> = BTreeMap::new();
-    for piece in &pieces {
+    for piece in pieces {
         let Some(lens) = lens_of(piece.patch) else {
             continue;
         };
@@ -147,24 +214,39 @@ pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepEr
         LensFamily::build(design, array, &lenses, (lo, hi), fit)
     };
     let (revealer, base) = rayon::join(|| family(Array::Revealer), || family(Array::Base));
-    let (revealer, base) = (revealer?, base?);
-    let surface_of = |lens: LensRef| match lens {
-        LensRef::Revealer(i) => &revealer.surfaces[&i],
-        LensRef::Base(k) => &base.surfaces[&k],
-    };
+    Ok((revealer?, base?))
+}
 
+/// The faces of a B-rep with one truck `Edge` per boundary run, used by its
+/// two faces in opposite directions, and the counts of edges and vertices.
+pub(crate) struct Assembled {
+    /// One face per piece, in the pieces' order.
+    pub faces: Vec<Face>,
+    pub edges: usize,
+    pub vertices: usize,
+}
+
+/// Assembles the faces of `pieces` (vertices at `positions`): every run's
+/// edge is made once, by `curve` (from the run's first vertex to its last),
+/// when the first piece that meets it is assembled; pieces for which `later`
+/// holds come last, so that their neighbours make their shared curves.
+pub(crate) fn assemble<P>(
+    pieces: &[Piece<P>],
+    positions: &[DVec3],
+    later: impl Fn(&Piece<P>) -> bool,
+    mut curve: impl FnMut(&Piece<P>, &Piece<P>, &Run) -> Result<Curve, BrepError>,
+    mut face: impl FnMut(&Piece<P>, Vec<Wire>) -> Result<Face, BrepError>,
+) -> Result<Assembled, BrepError> {
     let mut vertices: HashMap<u32, Vertex> = HashMap::new();
     let mut vertex = |v: u32| -> Vertex {
         vertices
             .entry(v)
-            .or_insert_with(|| Vertex::new(point3(dm.mesh.positions[v as usize])))
+            .or_insert_with(|| Vertex::new(point3(positions[v as usize])))
             .clone()
     };
     let mut edges: HashMap<(u32, u32), Edge> = HashMap::new();
-    // Lens pieces first: every edge with a lens on one side takes its curve
-    // from the lens.
     let mut order: Vec<usize> = (0..pieces.len()).collect();
-    order.sort_by_key(|&p| (lens_of(pieces[p].patch).is_none(), p));
+    order.sort_by_key(|&p| (later(&pieces[p]), p));
     let mut faces: Vec<Option<Face>> = vec![None; pieces.len()];
     for &p in &order {
         let piece = &pieces[p];
@@ -172,10 +254,9 @@ pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepEr
         for runs in &piece.loops {
             let mut wire = Wire::new();
             for run in runs {
+                let last = *run.vertices.last().expect("a run has two or more vertices");
                 let edge = match edges.get(&run.key()) {
-                    Some(e) if e.front().id() == vertex(*run.vertices.last().unwrap()).id() => {
-                        e.inverse()
-                    }
+                    Some(e) if e.front().id() == vertex(last).id() => e.inverse(),
                     Some(_) => {
                         return Err(BrepError::Topology(format!(
                             "edge {:?} is used twice in the same direction",
@@ -183,19 +264,9 @@ pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepEr
                         )))
                     }
                     None => {
-                        let curve = edge_curve(
-                            design,
-                            dm,
-                            piece,
-                            &pieces[run.neighbour],
-                            run,
-                            &surface_of,
-                        )?;
-                        let (a, b) = (
-                            vertex(run.vertices[0]),
-                            vertex(*run.vertices.last().unwrap()),
-                        );
-                        let e = Edge::try_new(&a, &b, curve).map_err(|e| BrepError::Truck {
+                        let c = curve(piece, &pieces[run.neighbour], run)?;
+                        let (a, b) = (vertex(run.vertices[0]), vertex(last));
+                        let e = Edge::try_new(&a, &b, c).map_err(|e| BrepError::Truck {
                             what: "edge",
                             detail: e.to_string(),
                         })?;
@@ -207,53 +278,16 @@ pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepEr
             }
             wires.push(wire);
         }
-        faces[p] = Some(make_face(design, dm, piece, wires, &surface_of)?);
+        faces[p] = Some(face(piece, wires)?);
     }
     let faces: Vec<Face> = faces
         .into_iter()
         .map(|f| f.expect("every piece has a face"))
         .collect();
-    let shell: Shell = faces.into();
-    let condition = shell.shell_condition();
-    if condition != ShellCondition::Closed {
-        return Err(BrepError::Truck {
-            what: "shell",
-            detail: format!("shell condition is {condition:?}, not Closed"),
-        });
-    }
-    let solid = Solid::try_new(vec![shell]).map_err(|e| BrepError::Truck {
-        what: "solid",
-        detail: e.to_string(),
-    })?;
-
-    let count = |f: &dyn Fn(&Piece) -> bool| pieces.iter().filter(|p| f(p)).count();
-    let base_lenses = ranges.keys().filter(|k| k.0 == Array::Base as u8).count();
-    let (deviation, worst) = [(&revealer, "revealer"), (&base, "base")]
-        .iter()
-        .map(|(f, name)| {
-            let (d, k, t, v) = f.deviation;
-            (d, format!("{name} lens {k} at t = {t:.2}, v = {v:.3} mm"))
-        })
-        .fold((0.0, String::new()), |a, b| if b.0 > a.0 { b } else { a });
-    let stats = BrepStats {
-        faces: pieces.len(),
-        revealer_faces: count(&|p| matches!(p.patch, Patch::Lens(LensRef::Revealer(_)))),
-        base_faces: count(&|p| matches!(p.patch, Patch::Lens(LensRef::Base(_)))),
-        base_lenses,
-        wall_faces: count(&|p| matches!(p.patch, Patch::Wall(_))),
+    Ok(Assembled {
+        faces,
         edges: edges.len(),
         vertices: vertices.len(),
-        revealer_stations: revealer.stations.len(),
-        base_stations: base.stations.len(),
-        max_surface_deviation_mm: deviation,
-        worst_surface: worst,
-        surface_fit_mm: fit,
-    };
-    Ok(DeviceBrep {
-        solid,
-        stats,
-        revealer,
-        base,
     })
 }
 
@@ -290,22 +324,13 @@ fn edge_curve<'s>(
         .into_iter()
         .find(|&t| params.iter().all(|p| p.x == t));
     if let Some(t) = on_crease {
-        let surface = surface_of(lens);
-        let row = if t == 0.0 { 0 } else { 2 };
-        let ctrl = surface.control_points();
-        let points: Vec<Point3> = ctrl[row]
-            .iter()
-            .map(|h| Point3::new(h.x / h.w, h.y / h.w, h.z / h.w))
-            .collect();
-        let mut whole = BSplineCurve::new(surface.vknot_vec().clone(), points);
         let (v0, v1) = (params[0].y, params.last().unwrap().y);
-        let (lo, hi) = (v0.min(v1), v0.max(v1));
-        let mut piece_curve = whole.cut(lo);
-        let _after = piece_curve.cut(hi);
-        if v0 > v1 {
-            piece_curve.invert();
-        }
-        return Ok(Curve::BSplineCurve(piece_curve));
+        return Ok(Curve::BSplineCurve(crease_curve(
+            surface_of(lens),
+            t,
+            v0,
+            v1,
+        )));
     }
     let Patch::Wall(side) = other_patch else {
         return Err(BrepError::Topology(format!(
@@ -313,12 +338,37 @@ fn edge_curve<'s>(
             other_patch
         )));
     };
-    // a trim: the cubic through the exact intersection points, in the wall
-    let pts: Vec<DVec3> = run
-        .vertices
+    let pts: Vec<DVec3> = run.vertices.iter().map(|&v| at(v)).collect();
+    Ok(trim_curve(design, side, &pts))
+}
+
+/// The crease curve of `surface` at t = 0 (row 0) or t = 1 (row 2),
+/// between stations v0 and v1 (in that direction).
+pub(crate) fn crease_curve(
+    surface: &truck_modeling::NurbsSurface<truck_modeling::Vector4>,
+    t: f64,
+    v0: f64,
+    v1: f64,
+) -> BSplineCurve<Point3> {
+    let row = if t == 0.0 { 0 } else { 2 };
+    let points: Vec<Point3> = surface.control_points()[row]
         .iter()
-        .map(|&v| onto_wall(design, side, at(v)))
+        .map(|h| Point3::new(h.x / h.w, h.y / h.w, h.z / h.w))
         .collect();
+    let mut whole = BSplineCurve::new(surface.vknot_vec().clone(), points);
+    let (lo, hi) = (v0.min(v1), v0.max(v1));
+    let mut piece_curve = whole.cut(lo);
+    let _after = piece_curve.cut(hi);
+    if v0 > v1 {
+        piece_curve.invert();
+    }
+    piece_curve
+}
+
+/// A trim, where a wall cuts a surface: the C² cubic through the exact
+/// intersection points `pts` (in order), flattened into the wall's plane.
+pub(crate) fn trim_curve(design: &Design, side: Side, pts: &[DVec3]) -> Curve {
+    let pts: Vec<DVec3> = pts.iter().map(|&p| onto_wall(design, side, p)).collect();
     let mut s = vec![0.0];
     for w in pts.windows(2) {
         s.push(s.last().unwrap() + (w[1] - w[0]).length());
@@ -328,10 +378,43 @@ fn edge_curve<'s>(
         .into_iter()
         .map(|c| point3(onto_wall(design, side, DVec3::from_array(c))))
         .collect();
-    Ok(Curve::BSplineCurve(BSplineCurve::new(
-        clamped_knots(&s),
-        ctrl,
-    )))
+    Curve::BSplineCurve(BSplineCurve::new(clamped_knots(&s), ctrl))
+}
+
+/// The planar face of a wall, outward.
+pub(crate) fn wall_face(
+    design: &Design,
+    side: Side,
+    wires: Vec<Wire>,
+) -> Result<Face, truck_topology::errors::Error> {
+    let (o, n) = wall_plane(design, side);
+    // in-plane axes a, b with a × b = outward normal
+    let a = if n.x != 0.0 { DVec3::Z } else { DVec3::X };
+    let b = n.cross(a);
+    debug_assert!((a.cross(b) - n).length() < 1e-15);
+    let plane = Plane::new(point3(o), point3(o + a), point3(o + b));
+    Face::try_new(wires, Surface::Plane(plane))
+}
+
+/// A face on `surface`, oriented like `outward` (a mesh triangle's normal)
+/// at the surface's parameters `at`.
+pub(crate) fn surface_face(
+    surface: &truck_modeling::NurbsSurface<truck_modeling::Vector4>,
+    outward: DVec3,
+    at: glam::DVec2,
+    wires: Vec<Wire>,
+) -> Result<Face, truck_topology::errors::Error> {
+    let nat = surface.normal(at.x, at.y);
+    let natural_is_outward = outward.dot(DVec3::new(nat.x, nat.y, nat.z)) > 0.0;
+    let surface = Surface::NurbsSurface(surface.clone());
+    if natural_is_outward {
+        Face::try_new(wires, surface)
+    } else {
+        let reversed: Vec<Wire> = wires.iter().map(|w| w.inverse()).collect();
+        let mut face = Face::try_new(reversed, surface)?;
+        face.invert();
+        Ok(face)
+    }
 }
 
 fn make_face<'s>(
@@ -346,34 +429,14 @@ fn make_face<'s>(
         detail: format!("{:?}: {e}", piece.patch),
     };
     match piece.patch {
-        Patch::Wall(side) => {
-            let (o, n) = wall_plane(design, side);
-            // in-plane axes a, b with a × b = outward normal
-            let a = if n.x != 0.0 { DVec3::Z } else { DVec3::X };
-            let b = n.cross(a);
-            debug_assert!((a.cross(b) - n).length() < 1e-15);
-            let plane = Plane::new(point3(o), point3(o + a), point3(o + b));
-            Face::try_new(wires, Surface::Plane(plane)).map_err(refuse)
-        }
+        Patch::Wall(side) => wall_face(design, side, wires).map_err(refuse),
         Patch::Lens(lens) => {
-            let surface = surface_of(lens);
             // orientation: the surface's own normal against the triangle's
             let tri = dm.mesh.triangles[piece.triangle as usize];
             let [p0, p1, p2] = tri.map(|v| dm.mesh.positions[v as usize]);
-            let outward = (p1 - p0).cross(p2 - p0);
             let pv = tri.map(|v| dm.origins[v as usize].params_on(lens).expect("checked"));
-            let c = (pv[0] + pv[1] + pv[2]) / 3.0;
-            let nat = surface.normal(c.x, c.y);
-            let natural_is_outward = outward.dot(DVec3::new(nat.x, nat.y, nat.z)) > 0.0;
-            let surface = Surface::NurbsSurface(surface.clone());
-            if natural_is_outward {
-                Face::try_new(wires, surface).map_err(refuse)
-            } else {
-                let reversed: Vec<Wire> = wires.iter().map(|w| w.inverse()).collect();
-                let mut face = Face::try_new(reversed, surface).map_err(refuse)?;
-                face.invert();
-                Ok(face)
-            }
+            let at = (pv[0] + pv[1] + pv[2]) / 3.0;
+            surface_face(surface_of(lens), (p1 - p0).cross(p2 - p0), at, wires).map_err(refuse)
         }
     }
 }

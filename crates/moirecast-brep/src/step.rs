@@ -3,7 +3,7 @@
 
 use crate::error::BrepError;
 use truck_modeling::Solid;
-use truck_stepio::out::{CompleteStepDisplay, StepHeaderDescriptor, StepModel};
+use truck_stepio::out::{CompleteStepDisplay, StepHeaderDescriptor, StepModel, StepModels};
 
 /// The timestamp written into every header: outputs are deterministic, so
 /// the file carries no clock reading (ISO 8601, as STEP asks).
@@ -25,6 +25,27 @@ pub fn step_text(solid: &Solid, file_name: &str, description: &str) -> String {
         },
     )
     .to_string();
+    with_header(&text, file_name, description)
+}
+
+/// The STEP text of several `solids` in one file (each its own solid), as
+/// file `file_name`, with the same header as [`step_text`].
+pub fn step_text_of(solids: &[Solid], file_name: &str, description: &str) -> String {
+    let compressed: Vec<_> = solids.iter().map(|s| s.compress()).collect();
+    let text = CompleteStepDisplay::new(
+        compressed.iter().collect::<StepModels<_, _, _>>(),
+        StepHeaderDescriptor {
+            file_name: file_name.into(),
+            time_stamp: STEP_TIMESTAMP.into(),
+            ..Default::default()
+        },
+    )
+    .to_string();
+    with_header(&text, file_name, description)
+}
+
+/// `text` (truck-stepio's) with the header written here.
+fn with_header(text: &str, file_name: &str, description: &str) -> String {
     let data = text
         .find("DATA;\n")
         .expect("truck-stepio writes a DATA section");

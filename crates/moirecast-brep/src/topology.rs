@@ -9,13 +9,15 @@
 //! vertices in opposite directions, which is how edges are shared.
 
 use crate::error::BrepError;
-use moirecast_kernel::mesher::{DeviceMesh, Patch};
+use moirecast_kernel::mesher::Patch;
+use moirecast_kernel::Mesh;
 use rayon::prelude::*;
 
-/// One face of the B-rep: a connected piece of one patch.
+/// One face of the B-rep: a connected piece of one patch (by default the
+/// device mesher's [`Patch`]; a printed body's faces use their own labels).
 #[derive(Debug)]
-pub struct Piece {
-    pub patch: Patch,
+pub struct Piece<P = Patch> {
+    pub patch: P,
     /// One triangle of the piece (for its orientation).
     pub triangle: u32,
     /// Boundary loops, counter-clockwise seen from outside, as runs.
@@ -51,17 +53,21 @@ fn find(parent: &mut [u32], mut x: u32) -> u32 {
     x
 }
 
-/// The faces of the device's B-rep, in a deterministic order (by their
-/// first triangle).
-pub fn pieces(dm: &DeviceMesh) -> Result<Vec<Piece>, BrepError> {
-    let tris = &dm.mesh.triangles;
+/// The faces of a closed mesh's B-rep whose triangles lie on `patches`
+/// (one label per triangle), in a deterministic order (by their first
+/// triangle).
+pub fn pieces<P: Copy + Eq + Send + Sync>(
+    mesh: &Mesh,
+    patches: &[P],
+) -> Result<Vec<Piece<P>>, BrepError> {
+    let tris = &mesh.triangles;
     let half = |h: usize| -> (u32, u32) {
         let t = tris[h / 3];
         (t[h % 3], t[(h + 1) % 3])
     };
     // twin[h]: the opposite half-edge, looked up among the half-edges that
     // leave h's end vertex (bucketed by start vertex: linear time).
-    let vertices = dm.mesh.positions.len();
+    let vertices = mesh.positions.len();
     let mut offsets = vec![0u32; vertices + 1];
     for t in tris {
         for &v in t {
@@ -103,7 +109,7 @@ pub fn pieces(dm: &DeviceMesh) -> Result<Vec<Piece>, BrepError> {
     for h in 0..tris.len() * 3 {
         let t2 = twin[h] as usize / 3;
         // each edge once, from its lower triangle
-        if t2 > h / 3 && dm.patches[h / 3] == dm.patches[t2] {
+        if t2 > h / 3 && patches[h / 3] == patches[t2] {
             let (a, b) = (
                 find(&mut parent, (h / 3) as u32),
                 find(&mut parent, t2 as u32),
@@ -185,7 +191,7 @@ pub fn pieces(dm: &DeviceMesh) -> Result<Vec<Piece>, BrepError> {
         .into_iter()
         .zip(loops_of)
         .map(|(t, loops)| Piece {
-            patch: dm.patches[t as usize],
+            patch: patches[t as usize],
             triangle: t,
             loops,
         })

@@ -21,7 +21,7 @@
 use crate::design::{BaseKind, Design, PrintedBase};
 use crate::error::{KernelError, Result};
 use crate::mesh::Mesh;
-use crate::mesher::{DeviceMesh, Patch};
+use crate::mesher::{DeviceMesh, Patch, Side, VertexOrigin};
 use crate::model::LensRef;
 use crate::tolerance::WALL_SNAP_MM;
 use glam::DVec3;
@@ -41,6 +41,14 @@ pub struct PrintedBodies {
     pub clear_on_band: Vec<bool>,
     /// Tangential wall touches of band edges, and their repair.
     pub wall_touches: WallTouches,
+    /// What each triangle of `clear` lies on (for the B-rep).
+    pub clear_faces: Vec<BodyFace>,
+    /// What each triangle of `black` lies on.
+    pub black_faces: Vec<BodyFace>,
+    /// Per vertex of `clear`: the device-mesh vertex above it and its layer.
+    pub clear_vertices: Vec<(u32, Layer)>,
+    /// Per vertex of `black`: the device-mesh vertex above it and its layer.
+    pub black_vertices: Vec<(u32, Layer)>,
     /// Number of band shells in `black`.
     pub bands: u32,
     /// Through-holes of `clear`: a band whose ends meet the walls in two
@@ -56,12 +64,44 @@ pub struct PrintedBodies {
     pub black_area_whole: f64,
 }
 
-/// Depth layers below s.
-#[derive(Clone, Copy, PartialEq, Eq, Hash)]
-enum Layer {
+/// Depth layers below s: every body vertex is a device-mesh vertex moved
+/// down along z to one of them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Layer {
+    /// The device mesh itself (s, the revealer and the upper walls).
     Top,
+    /// The bands' bottom, t_b below s.
     BandBottom,
+    /// The backing's bottom, t_b + t_back below s.
     Bottom,
+}
+
+impl Layer {
+    /// How far below the device-mesh vertex (mm, along −z) this layer lies.
+    pub fn depth(self, pb: &PrintedBase) -> f64 {
+        match self {
+            Layer::Top => 0.0,
+            Layer::BandBottom => pb.band_thickness,
+            Layer::Bottom => pb.band_thickness + pb.backing,
+        }
+    }
+}
+
+/// The exact surface a triangle of a printed body lies on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BodyFace {
+    /// Revealer lens i (the clear body's top).
+    Revealer(i64),
+    /// A side wall's plane: the upper walls, the clear body's lower walls
+    /// and the bands' end caps.
+    Wall(Side),
+    /// Base section k of s (a band span), moved down to `layer`.
+    Section { k: i64, layer: Layer },
+    /// The vertical side of a band below base crease `crease`.
+    BandSide { crease: i64 },
+    /// A band side along an edge of s that is no crease: only where a
+    /// tangential wall touch was repaired (see [`WallTouches`]).
+    Repaired,
 }
 
 /// A mesh built from vertices of the device mesh at a depth layer, each
@@ -73,6 +113,10 @@ struct Body<'a> {
     index: Vec<u32>,
     /// Source vertex of each vertex of this body.
     origin: Vec<u32>,
+    /// Layer of each vertex of this body.
+    layer: Vec<Layer>,
+    /// What each triangle lies on.
+    faces: Vec<BodyFace>,
     mesh: Mesh,
 }
 
@@ -83,6 +127,8 @@ impl<'a> Body<'a> {
             depths: (pb.band_thickness, pb.band_thickness + pb.backing),
             index: vec![u32::MAX; 3 * source.len()],
             origin: Vec::new(),
+            layer: Vec::new(),
+            faces: Vec::new(),
             mesh: Mesh::default(),
         }
     }
@@ -101,21 +147,32 @@ impl<'a> Body<'a> {
         let i = self.mesh.positions.len() as u32;
         self.mesh.positions.push(DVec3::new(p.x, p.y, p.z - depth));
         self.origin.push(v);
+        self.layer.push(layer);
         self.index[slot] = i;
         i
     }
 
-    fn triangle(&mut self, t: [u32; 3], layer: Layer, flip: bool) {
+    fn triangle(&mut self, t: [u32; 3], layer: Layer, flip: bool, face: BodyFace) {
         let [a, b, c] = t.map(|v| self.vertex(v, layer));
         self.mesh
             .triangles
             .push(if flip { [a, c, b] } else { [a, b, c] });
+        self.faces.push(face);
+    }
+
+    /// Per vertex: its source vertex and layer.
+    fn vertices(&self) -> Vec<(u32, Layer)> {
+        self.origin
+            .iter()
+            .copied()
+            .zip(self.layer.iter().copied())
+            .collect()
     }
 
     /// The vertical quad below directed edge a→b between two layers, made
     /// to pair with a face above that holds b→a at `upper` and a face below
     /// that holds a→b at `lower` (or the reverse when `flip`).
-    fn quad(&mut self, (a, b): (u32, u32), upper: Layer, lower: Layer, flip: bool) {
+    fn quad(&mut self, (a, b): (u32, u32), upper: Layer, lower: Layer, flip: bool, face: BodyFace) {
         let (a0, b0, a1, b1) = (
             self.vertex(a, upper),
             self.vertex(b, upper),
@@ -129,6 +186,7 @@ impl<'a> Body<'a> {
             self.mesh.triangles.push([a0, b0, b1]);
             self.mesh.triangles.push([a0, b1, a1]);
         }
+        self.faces.extend([face; 2]);
     }
 }
 
@@ -249,6 +307,22 @@ fn repair_wall_touches(
     Ok(found)
 }
 
+/// The side wall nearest to `p` (a point of the outline).
+fn wall_side(design: &Design, p: DVec3) -> Side {
+    let (xl, xr) = design.outline_x;
+    let h = design.half_height;
+    [
+        ((p.x - xl).abs(), Side::Left),
+        ((p.x - xr).abs(), Side::Right),
+        ((p.y + h).abs(), Side::Front),
+        ((p.y - h).abs(), Side::Back),
+    ]
+    .into_iter()
+    .min_by(|a, b| a.0.total_cmp(&b.0))
+    .map(|(_, side)| side)
+    .expect("four walls")
+}
+
 /// Extends `flags` to every triangle of `body` made so far with `value`.
 fn mark(body: &Body, flags: &mut Vec<bool>, value: bool) {
     flags.resize(body.mesh.triangles.len(), value);
@@ -294,11 +368,26 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
     let mut slab = Body::new(pos, &pb);
     // the revealer and the upper walls belong to the clear body and the slab
     for (ti, t) in tris.iter().enumerate() {
-        if band_of(ti).is_none() {
-            clear.triangle(*t, Layer::Top, false);
-            slab.triangle(*t, Layer::Top, false);
-        }
+        let face = match dm.patches[ti] {
+            Patch::Lens(LensRef::Revealer(i)) => BodyFace::Revealer(i),
+            Patch::Wall(side) => BodyFace::Wall(side),
+            Patch::Lens(LensRef::Base(_)) => continue,
+        };
+        clear.triangle(*t, Layer::Top, false, face);
+        slab.triangle(*t, Layer::Top, false, face);
     }
+    // what a vertical quad below edge a→b of s lies on
+    let band_side = |a: u32, b: u32| match (dm.origins[a as usize], dm.origins[b as usize]) {
+        (VertexOrigin::BaseCrease { k: c, .. }, VertexOrigin::BaseCrease { k: d, .. })
+            if c == d =>
+        {
+            BodyFace::BandSide { crease: c }
+        }
+        _ => BodyFace::Repaired,
+    };
+    let wall = |a: u32, b: u32| {
+        BodyFace::Wall(wall_side(design, 0.5 * (pos[a as usize] + pos[b as usize])))
+    };
     let (mut layer_area, mut black_area) = (0.0, 0.0);
     // per period m: xy area of its band, of all of it, and whether it meets an x-wall
     let mut periods: std::collections::BTreeMap<i64, (f64, f64, bool)> = Default::default();
@@ -306,29 +395,31 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
     for ((t, is_black), &ti) in s_tris.iter().zip(&s_index) {
         let is_black = *is_black;
         let area = xy_area(pos, t);
+        let Patch::Lens(LensRef::Base(k)) = dm.patches[ti] else {
+            unreachable!("s_tris holds base triangles only")
+        };
+        let section = |layer| BodyFace::Section { k, layer };
         layer_area += area;
-        if let Patch::Lens(LensRef::Base(k)) = dm.patches[ti] {
-            let period = periods.entry(k.div_euclid(2)).or_default();
-            period.1 += area;
-            if is_black {
-                period.0 += area;
-            }
-            period.2 |= t.iter().any(|&v| {
-                let x = pos[v as usize].x;
-                (x - xl).abs() <= WALL_SNAP_MM || (x - xr).abs() <= WALL_SNAP_MM
-            });
+        let period = periods.entry(k.div_euclid(2)).or_default();
+        period.1 += area;
+        if is_black {
+            period.0 += area;
         }
+        period.2 |= t.iter().any(|&v| {
+            let x = pos[v as usize].x;
+            (x - xl).abs() <= WALL_SNAP_MM || (x - xr).abs() <= WALL_SNAP_MM
+        });
         // s faces down in the device mesh; the backing's bottom does too
-        clear.triangle(*t, Layer::Bottom, false);
-        slab.triangle(*t, Layer::Bottom, false);
+        clear.triangle(*t, Layer::Bottom, false, section(Layer::Bottom));
+        slab.triangle(*t, Layer::Bottom, false, section(Layer::Bottom));
         if is_black {
             black_area += area;
             mark(&clear, &mut clear_on_band, false);
-            clear.triangle(*t, Layer::Top, false);
-            clear.triangle(*t, Layer::BandBottom, true);
+            clear.triangle(*t, Layer::Top, false, section(Layer::Top));
+            clear.triangle(*t, Layer::BandBottom, true, section(Layer::BandBottom));
             mark(&clear, &mut clear_on_band, true);
-            black.triangle(*t, Layer::Top, true);
-            black.triangle(*t, Layer::BandBottom, false);
+            black.triangle(*t, Layer::Top, true, section(Layer::Top));
+            black.triangle(*t, Layer::BandBottom, false, section(Layer::BandBottom));
         }
         for e in 0..3 {
             let edge = (t[e], t[(e + 1) % 3]);
@@ -336,21 +427,23 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
                 // interior edge of s: a band side where black meets clear
                 Some(other) => {
                     if is_black && !other {
-                        black.quad(edge, Layer::Top, Layer::BandBottom, false);
+                        let side = band_side(edge.0, edge.1);
+                        black.quad(edge, Layer::Top, Layer::BandBottom, false, side);
                         mark(&clear, &mut clear_on_band, false);
-                        clear.quad(edge, Layer::Top, Layer::BandBottom, true);
+                        clear.quad(edge, Layer::Top, Layer::BandBottom, true, side);
                         mark(&clear, &mut clear_on_band, true);
                     }
                 }
                 // on the outline: the lower wall
                 None => {
-                    slab.quad(edge, Layer::Top, Layer::Bottom, false);
+                    let w = wall(edge.0, edge.1);
+                    slab.quad(edge, Layer::Top, Layer::Bottom, false, w);
                     if is_black {
-                        black.quad(edge, Layer::Top, Layer::BandBottom, false);
+                        black.quad(edge, Layer::Top, Layer::BandBottom, false, w);
                     } else {
-                        clear.quad(edge, Layer::Top, Layer::BandBottom, false);
+                        clear.quad(edge, Layer::Top, Layer::BandBottom, false, w);
                     }
-                    clear.quad(edge, Layer::BandBottom, Layer::Bottom, false);
+                    clear.quad(edge, Layer::BandBottom, Layer::Bottom, false, w);
                 }
             }
         }
@@ -362,6 +455,10 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
     let (black_area_whole, layer_area_whole) =
         whole.fold((0.0, 0.0), |(b, l), p| (b + p.0, l + p.1));
     Ok(PrintedBodies {
+        clear_faces: std::mem::take(&mut clear.faces),
+        black_faces: std::mem::take(&mut black.faces),
+        clear_vertices: clear.vertices(),
+        black_vertices: black.vertices(),
         clear: clear.mesh,
         clear_on_band,
         wall_touches: repair,
