@@ -189,6 +189,18 @@ impl LensFamily {
     }
 }
 
+/// The worst deviation of several families, each named (`"revealer
+/// lens"`), and where it is, in words.
+pub fn worst_deviation(families: &[(&LensFamily, &str)]) -> (f64, String) {
+    families
+        .iter()
+        .map(|(f, name)| {
+            let (d, k, t, v) = f.deviation;
+            (d, format!("{name} {k} at t = {t:.2}, v = {v:.3} mm"))
+        })
+        .fold((0.0, String::new()), |a, b| if b.0 > a.0 { b } else { a })
+}
+
 fn glam_of(p: Point3) -> glam::DVec3 {
     glam::DVec3::new(p.x, p.y, p.z)
 }

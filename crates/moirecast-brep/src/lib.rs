@@ -52,9 +52,11 @@ pub fn device_step(
     let s = &brep.stats;
     let checks = vec![surface_fit_check(
         design,
-        s.max_surface_deviation_mm,
-        &s.worst_surface,
-        s.surface_fit_mm,
+        (
+            s.max_surface_deviation_mm,
+            &s.worst_surface,
+            s.surface_fit_mm,
+        ),
     )];
     Ok(DeviceStep { brep, step, checks })
 }
@@ -95,12 +97,12 @@ pub fn printed_step(
         },
     );
     let s = &brep.stats;
-    let checks = vec![surface_fit_check(
-        design,
+    let fit = (
         s.max_surface_deviation_mm,
-        &s.worst_surface,
+        s.worst_surface.as_str(),
         s.surface_fit_mm,
-    )];
+    );
+    let checks = vec![surface_fit_check(design, fit)];
     Ok(PrintedStep {
         brep,
         clear_step,
@@ -110,8 +112,9 @@ pub fn printed_step(
 }
 
 /// `brep-surface-fit`: the worst sampled distance (mm) of a lens or band
-/// face from its exact section, `worst` saying where, within the tolerance.
-fn surface_fit_check(design: &Design, deviation: f64, worst: &str, fit_mm: f64) -> CheckResult {
+/// face from its exact section, where it is, and the fit the stations were
+/// refined to; within the tolerance.
+fn surface_fit_check(design: &Design, (deviation, worst, fit_mm): (f64, &str, f64)) -> CheckResult {
     CheckResult::at_most(
         "brep-surface-fit",
         deviation,

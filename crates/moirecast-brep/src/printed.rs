@@ -15,10 +15,11 @@
 //! - the side walls' planes.
 //!
 //! Edges are the creases of these surfaces (cut to the run's stations and
-//! moved to the layer), trims in the walls' planes, and vertical lines.
+//! moved to the layer), trims in the walls' planes, and the mesh's vertical
+//! edges (wall corners, band ends) as polylines.
 
 use crate::error::BrepError;
-use crate::lenses::LensFamily;
+use crate::lenses::{worst_deviation, LensFamily};
 use crate::solid::{
     assemble, crease_curve, lens_families, surface_face, trim_curve, wall_face, FIT_SHARE,
 };
@@ -29,7 +30,7 @@ use moirecast_kernel::model::LensRef;
 use moirecast_kernel::printed::{BodyFace, Layer, PrintedBodies};
 use moirecast_kernel::{BaseKind, Design, Mesh, PrintedBase};
 use truck_modeling::{
-    BSplineCurve, BSplineSurface, Curve, Face, KnotVec, Line, NurbsSurface, Point3, Shell,
+    BSplineCurve, BSplineSurface, Curve, Face, KnotVec, NurbsSurface, Point3, Shell,
     ShellCondition, Solid, Vector4, Wire,
 };
 
@@ -250,16 +251,10 @@ pub fn build_printed_brep(
         vertices,
         inner_loops,
     } = clear_counts;
-    let (deviation, worst) = [
+    let (deviation, worst) = worst_deviation(&[
         (&surfaces.revealer, "revealer lens"),
         (&surfaces.base, "band span"),
-    ]
-    .iter()
-    .map(|(f, name)| {
-        let (d, k, t, v) = f.deviation;
-        (d, format!("{name} {k} at t = {t:.2}, v = {v:.3} mm"))
-    })
-    .fold((0.0, String::new()), |a, b| if b.0 > a.0 { b } else { a });
+    ]);
     let stats = PrintedBrepStats {
         clear_faces: faces,
         clear_edges: edges,
@@ -315,27 +310,17 @@ fn body_shells(
         }
     };
     let at = |v: u32| body.mesh.positions[v as usize];
-    let point3 = |p: DVec3| Point3::new(p.x, p.y, p.z);
     let curve = |piece: &Piece<BodyFace>, other: &Piece<BodyFace>, run: &Run| {
-        let (first, last) = (run.vertices[0], *run.vertices.last().unwrap());
         // the face with a lens or band surface decides the curve
         let (surface_face, other_face) = match (lens_of(piece.patch), lens_of(other.patch)) {
             (Some(_), _) => (piece.patch, other.patch),
             (None, Some(_)) => (other.patch, piece.patch),
             (None, None) => {
-                // walls and band sides meet in vertical lines
-                let (a, b) = (at(first), at(last));
-                let vertical = run.vertices.iter().all(|&v| {
-                    let p = at(v);
-                    (p.x - a.x).abs() <= 1e-9 && (p.y - a.y).abs() <= 1e-9
-                });
-                if !vertical {
-                    return Err(BrepError::Topology(format!(
-                        "{:?} meets {:?} along a line that is not vertical, from {a} to {b}",
-                        piece.patch, other.patch
-                    )));
-                }
-                return Ok(Curve::Line(Line(point3(a), point3(b))));
+                // walls and band sides meet in vertical lines: the mesh's
+                // (a wall corner's vertices lie on the outline only to the
+                // mesher's wall snap, as in the device's B-rep)
+                let pts: Vec<DVec3> = run.vertices.iter().map(|&v| at(v)).collect();
+                return Ok(Curve::BSplineCurve(polyline(&pts)));
             }
         };
         let (lens, layer) = lens_of(surface_face).expect("chosen for its surface");

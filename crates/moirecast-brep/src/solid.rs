@@ -14,7 +14,7 @@
 //! measures that.
 
 use crate::error::BrepError;
-use crate::lenses::{Array, LensFamily};
+use crate::lenses::{worst_deviation, Array, LensFamily};
 use crate::spline::{clamped_knots, interpolate};
 use crate::topology::{pieces, Piece, Run};
 use glam::DVec3;
@@ -139,13 +139,7 @@ pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepEr
 
     let count = |f: &dyn Fn(&Piece) -> bool| pieces.iter().filter(|p| f(p)).count();
     let base_lenses = base.surfaces.len();
-    let (deviation, worst) = [(&revealer, "revealer"), (&base, "base")]
-        .iter()
-        .map(|(f, name)| {
-            let (d, k, t, v) = f.deviation;
-            (d, format!("{name} lens {k} at t = {t:.2}, v = {v:.3} mm"))
-        })
-        .fold((0.0, String::new()), |a, b| if b.0 > a.0 { b } else { a });
+    let (deviation, worst) = worst_deviation(&[(&revealer, "revealer lens"), (&base, "base lens")]);
     let stats = BrepStats {
         faces: pieces.len(),
         revealer_faces: count(&|p| matches!(p.patch, Patch::Lens(LensRef::Revealer(_)))),

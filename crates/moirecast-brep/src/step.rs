@@ -3,7 +3,7 @@
 
 use crate::error::BrepError;
 use truck_modeling::Solid;
-use truck_stepio::out::{CompleteStepDisplay, StepHeaderDescriptor, StepModel, StepModels};
+use truck_stepio::out::{CompleteStepDisplay, StepHeaderDescriptor, StepModels};
 
 /// The timestamp written into every header: outputs are deterministic, so
 /// the file carries no clock reading (ISO 8601, as STEP asks).
@@ -15,17 +15,7 @@ pub const STEP_TIMESTAMP: &str = "2000-01-01T00:00:00";
 /// pair of parentheses (`(('x'))`), which OpenCascade reports as an error,
 /// and stamps the current time; the header is therefore written here.
 pub fn step_text(solid: &Solid, file_name: &str, description: &str) -> String {
-    let compressed = solid.compress();
-    let text = CompleteStepDisplay::new(
-        StepModel::from(&compressed),
-        StepHeaderDescriptor {
-            file_name: file_name.into(),
-            time_stamp: STEP_TIMESTAMP.into(),
-            ..Default::default()
-        },
-    )
-    .to_string();
-    with_header(&text, file_name, description)
+    step_text_of(std::slice::from_ref(solid), file_name, description)
 }
 
 /// The STEP text of several `solids` in one file (each its own solid), as
