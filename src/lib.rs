@@ -174,7 +174,7 @@ pub fn run_device(
     refuse_failed(&checks)?;
     if let moirecast_kernel::BaseKind::Printed(_) = spec.design.params.base.kind {
         if mesher == Mesher::Brep {
-            bail!("--mesher brep needs the device's B-rep, which is built for dual-lens devices only; leave it out for a printed device");
+            bail!("--mesher brep writes the truck-meshalgo tessellation of a dual-lens device's B-rep as its STL; a printed device's two bodies come from the direct mesher only (their B-rep is written as STEP); leave it out for a printed device");
         }
         return printed::write_printed_device(spec, &build, checks, out, progress);
     }
