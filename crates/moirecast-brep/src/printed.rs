@@ -23,6 +23,7 @@ use crate::lenses::{worst_deviation, LensFamily};
 use crate::solid::{
     assemble, crease_curve, lens_families, surface_face, trim_curve, wall_face, FIT_SHARE,
 };
+use crate::spline::chord_lengths;
 use crate::topology::{pieces, Piece, Run};
 use glam::{DVec2, DVec3};
 use moirecast_kernel::mesher::DeviceMesh;
@@ -96,10 +97,9 @@ impl Surfaces<'_> {
             }
         };
         let top: Vec<Vector4> = surface.control_points()[row].clone();
-        let depth = self.printed.band_thickness;
         let bottom: Vec<Vector4> = top
             .iter()
-            .map(|h| Vector4::new(h.x, h.y, h.z - h.w * depth, h.w))
+            .map(|h| down(h, self.printed.band_thickness))
             .collect();
         Ok(NurbsSurface::new(BSplineSurface::new(
             (KnotVec::bezier_knot(1), surface.vknot_vec().clone()),
@@ -108,8 +108,13 @@ impl Surfaces<'_> {
     }
 }
 
-/// `surface` moved `depth` mm down along z (exact: every homogeneous
-/// control point moves by −depth·w along z).
+/// A homogeneous control point moved `depth` mm down along z (exact: by
+/// −depth·w in its z coordinate).
+fn down(h: &Vector4, depth: f64) -> Vector4 {
+    Vector4::new(h.x, h.y, h.z - h.w * depth, h.w)
+}
+
+/// `surface` moved `depth` mm down along z, control point by control point.
 fn moved_down(surface: &NurbsSurface<Vector4>, depth: f64) -> NurbsSurface<Vector4> {
     if depth == 0.0 {
         return surface.clone();
@@ -117,25 +122,12 @@ fn moved_down(surface: &NurbsSurface<Vector4>, depth: f64) -> NurbsSurface<Vecto
     let rows = surface
         .control_points()
         .iter()
-        .map(|row| {
-            row.iter()
-                .map(|h| Vector4::new(h.x, h.y, h.z - h.w * depth, h.w))
-                .collect()
-        })
+        .map(|row| row.iter().map(|h| down(h, depth)).collect())
         .collect();
     NurbsSurface::new(BSplineSurface::new(
         (surface.uknot_vec().clone(), surface.vknot_vec().clone()),
         rows,
     ))
-}
-
-/// Chord-length parameters of a polyline's vertices.
-fn chord_lengths(pts: &[DVec3]) -> Vec<f64> {
-    let mut s = vec![0.0];
-    for w in pts.windows(2) {
-        s.push(s.last().unwrap() + (w[1] - w[0]).length());
-    }
-    s
 }
 
 /// Degree-1 knots over `params` (clamped).
@@ -161,7 +153,7 @@ fn ruled_down(pts: &[DVec3], depth: f64) -> (NurbsSurface<Vector4>, Vec<f64>) {
     let params = chord_lengths(pts);
     let row = |dz: f64| -> Vec<Vector4> {
         pts.iter()
-            .map(|p| Vector4::new(p.x, p.y, p.z - dz, 1.0))
+            .map(|p| down(&Vector4::new(p.x, p.y, p.z, 1.0), dz))
             .collect()
     };
     let surface = NurbsSurface::new(BSplineSurface::new(

@@ -15,7 +15,7 @@
 
 use crate::error::BrepError;
 use crate::lenses::{worst_deviation, Array, LensFamily};
-use crate::spline::{clamped_knots, interpolate};
+use crate::spline::{chord_lengths, clamped_knots, interpolate};
 use crate::topology::{pieces, Piece, Run};
 use glam::DVec3;
 use moirecast_kernel::mesher::{DeviceMesh, Patch, Side};
@@ -363,10 +363,7 @@ pub(crate) fn crease_curve(
 /// intersection points `pts` (in order), flattened into the wall's plane.
 pub(crate) fn trim_curve(design: &Design, side: Side, pts: &[DVec3]) -> Curve {
     let pts: Vec<DVec3> = pts.iter().map(|&p| onto_wall(design, side, p)).collect();
-    let mut s = vec![0.0];
-    for w in pts.windows(2) {
-        s.push(s.last().unwrap() + (w[1] - w[0]).length());
-    }
+    let s = chord_lengths(&pts);
     let data: Vec<[f64; 3]> = pts.iter().map(|p| p.to_array()).collect();
     let ctrl: Vec<Point3> = interpolate(&s, &data)
         .into_iter()

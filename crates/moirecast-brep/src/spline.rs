@@ -9,6 +9,15 @@
 use truck_modeling::KnotVec;
 
 /// Clamped cubic knot vector with one interior knot per interior parameter.
+/// Chord-length parameters of a polyline's vertices (from 0).
+pub fn chord_lengths(pts: &[glam::DVec3]) -> Vec<f64> {
+    let mut s = vec![0.0];
+    for w in pts.windows(2) {
+        s.push(s.last().unwrap() + (w[1] - w[0]).length());
+    }
+    s
+}
+
 pub fn clamped_knots(params: &[f64]) -> KnotVec {
     let (first, last) = (params[0], params[params.len() - 1]);
     let mut knots = vec![first; 4];

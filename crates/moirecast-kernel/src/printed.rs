@@ -108,13 +108,11 @@ pub enum BodyFace {
 /// made once, numbered in first-use order (deterministic).
 struct Body<'a> {
     source: &'a [DVec3],
-    depths: (f64, f64),
+    printed: PrintedBase,
     /// Index in this body of (source vertex, layer), or `u32::MAX`.
     index: Vec<u32>,
-    /// Source vertex of each vertex of this body.
-    origin: Vec<u32>,
-    /// Layer of each vertex of this body.
-    layer: Vec<Layer>,
+    /// Source vertex and layer of each vertex of this body.
+    origin: Vec<(u32, Layer)>,
     /// What each triangle lies on.
     faces: Vec<BodyFace>,
     mesh: Mesh,
@@ -124,10 +122,9 @@ impl<'a> Body<'a> {
     fn new(source: &'a [DVec3], pb: &PrintedBase) -> Self {
         Body {
             source,
-            depths: (pb.band_thickness, pb.band_thickness + pb.backing),
+            printed: *pb,
             index: vec![u32::MAX; 3 * source.len()],
             origin: Vec::new(),
-            layer: Vec::new(),
             faces: Vec::new(),
             mesh: Mesh::default(),
         }
@@ -139,15 +136,10 @@ impl<'a> Body<'a> {
             return self.index[slot];
         }
         let p = self.source[v as usize];
-        let depth = match layer {
-            Layer::Top => 0.0,
-            Layer::BandBottom => self.depths.0,
-            Layer::Bottom => self.depths.1,
-        };
+        let depth = layer.depth(&self.printed);
         let i = self.mesh.positions.len() as u32;
         self.mesh.positions.push(DVec3::new(p.x, p.y, p.z - depth));
-        self.origin.push(v);
-        self.layer.push(layer);
+        self.origin.push((v, layer));
         self.index[slot] = i;
         i
     }
@@ -158,15 +150,6 @@ impl<'a> Body<'a> {
             .triangles
             .push(if flip { [a, c, b] } else { [a, b, c] });
         self.faces.push(face);
-    }
-
-    /// Per vertex: its source vertex and layer.
-    fn vertices(&self) -> Vec<(u32, Layer)> {
-        self.origin
-            .iter()
-            .copied()
-            .zip(self.layer.iter().copied())
-            .collect()
     }
 
     /// The vertical quad below directed edge a→b between two layers, made
@@ -457,8 +440,8 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
     Ok(PrintedBodies {
         clear_faces: std::mem::take(&mut clear.faces),
         black_faces: std::mem::take(&mut black.faces),
-        clear_vertices: clear.vertices(),
-        black_vertices: black.vertices(),
+        clear_vertices: std::mem::take(&mut clear.origin),
+        black_vertices: black.origin,
         clear: clear.mesh,
         clear_on_band,
         wall_touches: repair,
@@ -527,13 +510,13 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 
 /// Connected shells of the black mesh and, per shell, the number of
 /// separate places where it meets the walls (connected groups of end caps).
-/// `origin` is the device-mesh vertex under each black vertex.
-fn shells_and_caps(black: &Mesh, origin: &[u32], on_s: &EdgeMap<bool>) -> (u32, Vec<u32>) {
+/// `origin` is the device-mesh vertex under each black vertex (and its layer).
+fn shells_and_caps(black: &Mesh, origin: &[(u32, Layer)], on_s: &EdgeMap<bool>) -> (u32, Vec<u32>) {
     let n = black.triangles.len() as u32;
     // a vertical quad's triangle has two vertices over one source vertex;
     // it is an end cap when its source edge lies on the outline (one-sided on s)
     let is_cap = |t: &[u32; 3]| {
-        let o = t.map(|i| origin[i as usize]);
+        let o = t.map(|i| origin[i as usize].0);
         let (a, b) = if o[0] == o[1] {
             (o[0], o[2])
         } else if o[1] == o[2] {
