@@ -322,7 +322,53 @@ pub fn run_mold(
     progress.stage("writing", 1);
     let mut checks: Vec<CheckResult> = build.checks.clone();
     checks.extend(mold.checks.iter().cloned());
-    let (device_checks, device) = SolidMesh::validate(&mold.device);
+    // Every STL is validated as a solid and encoded, in parallel; the
+    // halves' checks are in `checks` already.
+    let mut jobs: Vec<(String, &moirecast_kernel::Mesh, SolidSpec)> = vec![
+        (
+            "mold-top.stl".into(),
+            &mold.top,
+            SolidSpec::boolean_result(mold.genus_top),
+        ),
+        (
+            "mold-bottom.stl".into(),
+            &mold.bottom,
+            SolidSpec::boolean_result(mold.genus_bottom),
+        ),
+    ];
+    for c in &mold.construction {
+        jobs.push((
+            format!("construction-{}.stl", c.name),
+            &c.mesh,
+            SolidSpec::boolean_results(0, c.shells),
+        ));
+    }
+    use rayon::prelude::*;
+    let ((device_checks, device), encoded) = rayon::join(
+        || SolidMesh::validate(&mold.device),
+        || {
+            jobs.par_iter()
+                .map(
+                    |(name, mesh, spec)| -> Result<(Vec<u8>, report::FileReport)> {
+                        let (checks, solid) = SolidMesh::validate_for(mesh, *spec);
+                        let Some(solid) = solid else {
+                            let c = checks.iter().find(|c| !c.passed).expect("a failed check");
+                            bail!(
+                                "`{name}` failed check `{}` ({} vs {}: {}); nothing was written",
+                                c.name,
+                                c.value,
+                                c.limit,
+                                c.detail
+                            );
+                        };
+                        let bytes = stl_bytes(name, solid)?;
+                        let file = report::FileReport::of(solid.mesh(), bytes.len());
+                        Ok((bytes, file))
+                    },
+                )
+                .collect::<Vec<_>>()
+        },
+    );
     checks.splice(0..0, device_checks);
     if let Some(c) = checks.iter().find(|c| !c.passed) {
         if !force {
@@ -332,46 +378,21 @@ pub fn run_mold(
             );
         }
     }
-    let (_, top) = SolidMesh::validate_for(&mold.top, SolidSpec::boolean_result(mold.genus_top));
-    let (_, bottom) =
-        SolidMesh::validate_for(&mold.bottom, SolidSpec::boolean_result(mold.genus_bottom));
-    let (Some(device), Some(top), Some(bottom)) = (device, top, bottom) else {
-        bail!("a mold part is not a valid solid (see the failed checks); nothing was written");
+    let Some(device) = device else {
+        bail!("the device is not a valid solid (see the failed checks); nothing was written");
     };
     let mut files = OutputSet::new();
     let mut reports = std::collections::BTreeMap::new();
-    for (name, solid) in [
-        ("device.stl", device),
-        ("mold-top.stl", top),
-        ("mold-bottom.stl", bottom),
-    ] {
-        let bytes = stl_bytes(name, solid)?;
-        reports.insert(
-            name.to_string(),
-            report::FileReport::of(solid.mesh(), bytes.len()),
-        );
+    let device_bytes = stl_bytes("device.stl", device)?;
+    reports.insert(
+        "device.stl".to_string(),
+        report::FileReport::of(device.mesh(), device_bytes.len()),
+    );
+    files.add("device.stl", device_bytes);
+    for ((name, _, _), done) in jobs.iter().zip(encoded) {
+        let (bytes, file) = done?;
+        reports.insert(name.clone(), file);
         files.add(name, bytes);
-    }
-    for c in &mold.construction {
-        let name = format!("construction-{}.stl", c.name);
-        let (checks, solid) =
-            SolidMesh::validate_for(&c.mesh, SolidSpec::boolean_results(0, c.shells));
-        let Some(solid) = solid else {
-            let c = checks.iter().find(|c| !c.passed).expect("a failed check");
-            bail!(
-                "construction solid `{name}` failed check `{}` ({} vs {}: {}); nothing was written",
-                c.name,
-                c.value,
-                c.limit,
-                c.detail
-            );
-        };
-        let bytes = stl_bytes(&name, solid)?;
-        reports.insert(
-            name.clone(),
-            report::FileReport::of(solid.mesh(), bytes.len()),
-        );
-        files.add(&name, bytes);
     }
     let f = &mold.features;
     files.add(

@@ -645,6 +645,7 @@ fn a_small_mold_builds_with_every_file_and_check() {
     for name in [
         "mold-volumes-sum",
         "mold-no-overlaps",
+        "mold-parts-tile-block",
         "cavity-on-device",
         "cavity-covers-device",
         "demouldable",

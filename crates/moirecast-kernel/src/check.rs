@@ -237,8 +237,46 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
         detail: String::new(),
     });
 
-    let (min_alt, worst) = mesh
+    let (min_alt, worst) = smallest_altitude(mesh);
+    let at = mesh
         .triangles
+        .get(worst)
+        .map(|t| mesh.positions[t[0] as usize])
+        .unwrap_or_default();
+    if spec.f32_safe {
+        let (flipped, merged) = f32_rounding_faults(mesh);
+        out.push(CheckResult::at_most(
+            "f32-safe-triangles",
+            flipped as f64,
+            0.0,
+            "triangles",
+            "triangles that collapse or flip when rounded to f32 (STL)".into(),
+        ));
+        out.push(CheckResult::at_most(
+            "f32-distinct-vertices",
+            merged as f64,
+            0.0,
+            "vertices",
+            "vertices that round to the same f32 point as another vertex".into(),
+        ));
+    }
+    out.push(CheckResult::at_least(
+        "no-degenerate-triangles",
+        min_alt,
+        spec.min_altitude,
+        "mm",
+        format!(
+            "smallest altitude, at triangle {worst} near ({:.3}, {:.3}, {:.3})",
+            at.x, at.y, at.z
+        ),
+    ));
+    out
+}
+
+/// The smallest altitude of a triangle (mm; 0 for a collapsed one) and the
+/// first triangle that has it.
+pub fn smallest_altitude(mesh: &Mesh) -> (f64, usize) {
+    mesh.triangles
         .par_iter()
         .enumerate()
         .map(|(i, t)| {
@@ -260,56 +298,30 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
                     x
                 }
             },
-        );
-    let at = mesh
+        )
+}
+
+/// What rounding `mesh` to f32 (as an STL stores it) breaks: triangles
+/// that collapse or flip, and vertices that land on another vertex's f32
+/// point (a reader that welds an STL by position, as trimesh and slicers
+/// do, would join them).
+pub fn f32_rounding_faults(mesh: &Mesh) -> (usize, usize) {
+    let flipped = mesh
         .triangles
-        .get(worst)
-        .map(|t| mesh.positions[t[0] as usize])
-        .unwrap_or_default();
-    if spec.f32_safe {
-        let flipped = mesh
-            .triangles
-            .par_iter()
-            .filter(|t| {
-                let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
-                let [fa, fb, fc] = [a, b, c].map(|p| p.as_vec3().as_dvec3());
-                (b - a).cross(c - a).dot((fb - fa).cross(fc - fa)) <= 0.0
-            })
-            .count();
-        out.push(CheckResult::at_most(
-            "f32-safe-triangles",
-            flipped as f64,
-            0.0,
-            "triangles",
-            "triangles that collapse or flip when rounded to f32 (STL)".into(),
-        ));
-        // A reader that welds an STL by position (trimesh, slicers) would
-        // join two distinct vertices that round to the same f32 point.
-        let mut seen = std::collections::HashSet::with_capacity(mesh.positions.len());
-        let merged = mesh
-            .positions
-            .iter()
-            .filter(|p| !seen.insert(p.as_vec3().to_array().map(|c| (c + 0.0).to_bits())))
-            .count();
-        out.push(CheckResult::at_most(
-            "f32-distinct-vertices",
-            merged as f64,
-            0.0,
-            "vertices",
-            "vertices that round to the same f32 point as another vertex".into(),
-        ));
-    }
-    out.push(CheckResult::at_least(
-        "no-degenerate-triangles",
-        min_alt,
-        spec.min_altitude,
-        "mm",
-        format!(
-            "smallest altitude, at triangle {worst} near ({:.3}, {:.3}, {:.3})",
-            at.x, at.y, at.z
-        ),
-    ));
-    out
+        .par_iter()
+        .filter(|t| {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+            let [fa, fb, fc] = [a, b, c].map(|p| p.as_vec3().as_dvec3());
+            (b - a).cross(c - a).dot((fb - fa).cross(fc - fa)) <= 0.0
+        })
+        .count();
+    let mut seen = std::collections::HashSet::with_capacity(mesh.positions.len());
+    let merged = mesh
+        .positions
+        .iter()
+        .filter(|p| !seen.insert(p.as_vec3().to_array().map(|c| (c + 0.0).to_bits())))
+        .count();
+    (flipped, merged)
 }
 
 /// A mesh that passed every solid check. Only [`SolidMesh::validate`] makes

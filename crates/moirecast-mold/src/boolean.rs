@@ -24,13 +24,44 @@ pub fn checked(operation: impl Into<String>, m: Manifold) -> Result<Manifold> {
     }
 }
 
-/// Imports a closed mesh under a freshly reserved original ID, returned
-/// with it; every triangle carries its own index as face ID through the
-/// booleans, so faces of the results can be traced back to it.
-pub fn to_traced_manifold(what: &str, mesh: &Mesh) -> Result<(Manifold, u32)> {
-    let id = Manifold::reserve_ids(1);
-    let m = import(what, mesh, Some(id))?;
-    Ok((m, id))
+/// Imports a closed mesh under original ID `id`; every triangle carries its
+/// own index as face ID through the booleans, so faces of the results can be
+/// traced back to it.
+pub fn to_traced_manifold(what: &str, mesh: &Mesh, id: u32) -> Result<Manifold> {
+    let n = mesh.triangles.len() as u64;
+    let runs = Runs {
+        face_id: (0..n).collect(),
+        run_index: vec![0, 3 * n],
+        run_original_id: vec![id],
+    };
+    import(what, mesh, Some(runs))
+}
+
+/// Imports a region whose first `device_faces.len()` triangles are faces of
+/// the device (traced under `device_id` with those face IDs); the rest
+/// carry a fresh original ID.
+pub fn to_region_manifold(
+    what: &str,
+    mesh: &Mesh,
+    device_faces: &[u32],
+    device_id: u32,
+) -> Result<Manifold> {
+    let own_id = Manifold::reserve_ids(1);
+    let k = device_faces.len();
+    let face_id = device_faces
+        .iter()
+        .map(|&f| u64::from(f))
+        .chain(k as u64..mesh.triangles.len() as u64)
+        .collect();
+    import(
+        what,
+        mesh,
+        Some(Runs {
+            face_id,
+            run_index: vec![0, 3 * k as u64, 3 * mesh.triangles.len() as u64],
+            run_original_id: vec![device_id, own_id],
+        }),
+    )
 }
 
 /// Imports a closed mesh.
@@ -38,19 +69,28 @@ pub fn to_manifold(what: &str, mesh: &Mesh) -> Result<Manifold> {
     import(what, mesh, None)
 }
 
-fn import(what: &str, mesh: &Mesh, traced: Option<u32>) -> Result<Manifold> {
-    let mut g = MeshGL64::default();
-    g.num_prop = 3;
-    g.vert_properties = mesh.positions.iter().flat_map(|p| p.to_array()).collect();
-    g.tri_verts = mesh
-        .triangles
-        .iter()
-        .flat_map(|t| t.map(u64::from))
-        .collect();
-    if let Some(id) = traced {
-        g.face_id = (0..mesh.triangles.len() as u64).collect();
-        g.run_index = vec![0, g.tri_verts.len() as u64];
-        g.run_original_id = vec![id];
+/// Where an imported mesh's triangles come from (MeshGL's runs).
+struct Runs {
+    face_id: Vec<u64>,
+    run_index: Vec<u64>,
+    run_original_id: Vec<u32>,
+}
+
+fn import(what: &str, mesh: &Mesh, runs: Option<Runs>) -> Result<Manifold> {
+    let mut g = MeshGL64 {
+        num_prop: 3,
+        vert_properties: mesh.positions.iter().flat_map(|p| p.to_array()).collect(),
+        tri_verts: mesh
+            .triangles
+            .iter()
+            .flat_map(|t| t.map(u64::from))
+            .collect(),
+        ..MeshGL64::default()
+    };
+    if let Some(r) = runs {
+        g.face_id = r.face_id;
+        g.run_index = r.run_index;
+        g.run_original_id = r.run_original_id;
     }
     let m = checked(format!("import {what}"), Manifold::from_mesh_gl64(&g))?;
     if m.num_tri() != mesh.triangles.len() {
@@ -132,12 +172,21 @@ pub fn cuboid(lo: DVec3, hi: DVec3) -> Result<Manifold> {
     )
 }
 
+/// Turn (degrees) of every channel's polygon about its axis: half a facet,
+/// so that no polygon vertex sits at 0°, 90°, 180° or 270°. A channel
+/// centred on a symmetric device's middle, or on the parting line, would
+/// otherwise run an edge along a wall's rung or through the skirt, and the
+/// booleans would leave vertices nanometres apart there.
+const HALF_FACET_DEG: f64 = 180.0 / CIRCLE_SEGMENTS as f64;
+
 /// A vertical frustum over `axis` from `z0` (radius `r0`) to `z1` (radius `r1`).
 pub fn vertical_frustum(axis: DVec2, z0: f64, z1: f64, r0: f64, r1: f64) -> Result<Manifold> {
     checked(
         "vertical channel",
         snapped(
-            Manifold::cylinder(z1 - z0, r0, r1, CIRCLE_SEGMENTS).translate(v3(axis.extend(z0))),
+            Manifold::cylinder(z1 - z0, r0, r1, CIRCLE_SEGMENTS)
+                .rotate(0.0, 0.0, HALF_FACET_DEG)
+                .translate(v3(axis.extend(z0))),
         ),
     )
 }
@@ -150,6 +199,7 @@ pub fn horizontal_cylinder(from: DVec3, dir: DVec2, length: f64, r: f64) -> Resu
         "runner",
         snapped(
             Manifold::cylinder(length, r, r, CIRCLE_SEGMENTS)
+                .rotate(0.0, 0.0, HALF_FACET_DEG)
                 .rotate(0.0, 90.0, 0.0)
                 .rotate(0.0, 0.0, angle)
                 .translate(v3(from)),

@@ -11,6 +11,7 @@ pub mod error;
 pub mod features;
 pub mod params;
 pub mod parting;
+pub mod tiling;
 
 pub use error::{MoldError, MoldParam, Result};
 pub use features::{Features, Gate, Key, Vent, VentPlace};
@@ -21,10 +22,12 @@ use boolean::{
 };
 use glam::{DVec2, DVec3};
 use manifold_rust::manifold::Manifold;
-use moirecast_kernel::check::{solid_checks_for, solid_checks_of_genus, CheckResult, SolidSpec};
+use moirecast_kernel::check::{
+    self, solid_checks_for, solid_checks_of_genus, CheckResult, SolidSpec,
+};
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{Design, DeviceMesh, Mesh};
-use parting::{Face, HeightQuery, PartSide, PosedDevice};
+use parting::{Face, Floor, HeightQuery, PartSide, PosedDevice, Region};
 use rayon::prelude::*;
 
 /// Mold volumes sum to the block's to this relative error (METHOD §7.4).
@@ -35,12 +38,14 @@ pub const OVERLAP_MM3: f64 = 1e-4;
 /// any tolerance, so the cavity is within tolerance of the exact surface
 /// exactly when the device mesh is (METHOD §7.6).
 pub const CAVITY_ON_DEVICE_MM: f64 = 1e-6;
-/// Edges shorter than this (mm) that the booleans leave where the parting
-/// surface meets the device's walls are collapsed: far below any tolerance,
-/// and long enough that no triangle can flip when written as f32 STL.
+/// Edges shorter than this (mm) that the channels leave where they cross the
+/// device's faces are collapsed: far below any tolerance, and long enough
+/// that no triangle can flip when written as f32 STL.
 const SLIVER_MM: f64 = 1e-6;
-/// Bound on an opening's area on the device over its circle's area.
-const OPENING_SLACK: f64 = 1.5;
+/// The cavity's faces and the device's surface inside the channels make up
+/// the device's surface to this relative error: rounding of the channels'
+/// intersection points, and slivers collapsed by up to `SLIVER_MM`.
+const COVER_REL: f64 = 1e-6;
 /// How far (mm) the parting region and through-channels reach past the block.
 const PAST_BLOCK_MM: f64 = 1.0;
 /// Spacing (mm) of the parting surface's grid inside the outline.
@@ -95,6 +100,39 @@ pub struct ConstructionSolid {
     pub mesh: Mesh,
     /// Connected pieces it must have.
     pub shells: u32,
+}
+
+/// A half, checked, with its mesh; if the channels left slivers (edges
+/// shorter than `SLIVER_MM`, needles thinner than the solid checks allow,
+/// or triangles and vertices that rounding to f32 would break) where they cross the device's faces at a shallow angle,
+/// they are collapsed first (manifold's `simplify`; it
+/// costs a pass over the whole half, so it runs only when needed).
+fn sliver_free(what: &str, half: Manifold) -> Result<boolean::Traced> {
+    let half = checked(what, half)?;
+    let mesh = to_mesh(&half);
+    let m = &mesh.mesh;
+    let shortest = m
+        .triangles
+        .par_iter()
+        .flat_map_iter(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+        .map(|(a, b)| m.positions[a as usize].distance(m.positions[b as usize]))
+        .reduce(|| f64::INFINITY, f64::min);
+    if shortest >= SLIVER_MM
+        && check::smallest_altitude(m).0 >= check::MIN_BOOLEAN_ALTITUDE_MM
+        && check::f32_rounding_faults(m) == (0, 0)
+    {
+        return Ok(mesh);
+    }
+    let half = checked(
+        format!("{what}, slivers collapsed"),
+        half.simplify(SLIVER_MM),
+    )?;
+    Ok(to_mesh(&half))
+}
+
+/// Distance from `q` to the triangle `corners`.
+fn distance_to(q: DVec3, [a, b, c]: [DVec3; 3]) -> f64 {
+    (moirecast_kernel::measure::closest_on_triangle(q, a, b, c) - q).length()
 }
 
 /// Worst draft of the faces of one kind against `draw` (±z).
@@ -184,30 +222,55 @@ pub fn build_mold(
         _ => f64::NAN,
     };
     let footprint = features::block_rect(&f);
-    let region = |cap_z: f64, side: PartSide| -> Result<Mesh> {
-        let mesh =
-            parting::parting_region(&o, &walls, &interior_mid, cells, &footprint, cap_z, side);
-        if let Some(c) = solid_checks_of_genus(&mesh, 0)
+    let region = |floor: Floor, side: PartSide| -> Result<Region> {
+        let cap_z = match side {
+            PartSide::Above => f.block_hi.z,
+            PartSide::Below => f.block_lo.z,
+        };
+        let grid = matches!(floor, Floor::Grid { .. });
+        let r = parting::parting_region(&walls, floor, &footprint, cap_z, side);
+        if let Some(c) = solid_checks_of_genus(&r.mesh, 0)
             .into_iter()
             .find(|c| !c.passed)
         {
             return Err(MoldError::NotSolid {
-                what: "parting region",
+                what: if grid {
+                    "parting region"
+                } else {
+                    "mold half before its channels"
+                },
                 detail: format!("{side:?}: {}: {} ({})", c.name, c.value, c.detail),
             });
         }
-        Ok(mesh)
+        Ok(r)
     };
-    let (above_mesh, below_mesh) = (
-        region(f.block_hi.z, PartSide::Above)?,
-        region(f.block_lo.z, PartSide::Below)?,
+    let grid = || Floor::Grid {
+        interior_mid: &interior_mid,
+        cells,
+    };
+    // The halves before their channels: the device's own faces, walls
+    // split at the parting line, and the skirt. The regions over the grid
+    // are what another tool rebuilds them from (block side minus device).
+    let ((top_region, bottom_region), (above_mesh, below_mesh)) = rayon::join(
+        || {
+            rayon::join(
+                || region(Floor::Device(&posed), PartSide::Above),
+                || region(Floor::Device(&posed), PartSide::Below),
+            )
+        },
+        || {
+            (
+                region(grid(), PartSide::Above).map(|r| r.mesh),
+                region(grid(), PartSide::Below).map(|r| r.mesh),
+            )
+        },
     );
+    let (top_region, bottom_region) = (top_region?, bottom_region?);
+    let (above_mesh, below_mesh) = (above_mesh?, below_mesh?);
     progress.tick(1);
 
     progress.stage("mold booleans", 1);
-    let (dev, device_id) = boolean::to_traced_manifold("device", &posed.mesh)?;
     let above = to_manifold("block above the parting surface", &above_mesh)?;
-    let below = to_manifold("block below the parting surface", &below_mesh)?;
     let block = cuboid(f.block_lo, f.block_hi)?;
     let past_top = f.block_hi.z + PAST_BLOCK_MM;
     let g = &f.gate;
@@ -278,50 +341,56 @@ pub fn build_mold(
     let bumps = union_all("key bumps", bumps)?;
     let sockets = union_all("key sockets", sockets)?;
     let channels = checked("channels", fill.union(&bolts))?;
-    let top_block = checked(
-        "top half before the cavity",
-        above.difference(&checked("channels and sockets", channels.union(&sockets))?),
-    )?;
-    let bottom_block = checked(
-        "bottom half before the cavity",
-        below.union(&bumps).difference(&channels),
-    )?;
-    let (top_exact, bottom_exact) = rayon::join(
-        || checked("top half", top_block.difference(&dev)),
-        || checked("bottom half", bottom_block.difference(&dev)),
-    );
-    let (top_exact, bottom_exact) = (top_exact?, bottom_exact?);
-    let (top, bottom) = rayon::join(
-        || checked("top half, slivers collapsed", top_exact.simplify(SLIVER_MM)),
+    let top_cut = checked("channels and sockets", channels.union(&sockets))?;
+    // Three chains of about equal work on two cores: the top half, the
+    // device's import (for the volumes below), and the bottom half.
+    let device_id = Manifold::reserve_ids(1);
+    let import = |what: &str, r: &Region| {
+        boolean::to_region_manifold(what, &r.mesh, &r.device_faces, device_id)
+    };
+    let ((top_t, dev), bottom_t) = rayon::join(
         || {
-            checked(
-                "bottom half, slivers collapsed",
-                bottom_exact.simplify(SLIVER_MM),
+            rayon::join(
+                || {
+                    let top = import("top half before its channels", &top_region)?;
+                    sliver_free("top half", top.difference(&top_cut))
+                },
+                || boolean::to_traced_manifold("device", &posed.mesh, device_id),
             )
         },
+        || {
+            let bottom = import("bottom half before its channels", &bottom_region)?;
+            sliver_free("bottom half", bottom.union(&bumps).difference(&channels))
+        },
     );
-    let (top, bottom) = (top?, bottom?);
+    let (top_t, bottom_t, dev) = (top_t?, bottom_t?, dev?);
     progress.tick(1);
 
     progress.stage("mold solid checks", 1);
     let genus_top = 1 + f.vents.len() as u32 + f.bolts.len() as u32;
     let genus_bottom = f.bolts.len() as u32;
     let mut checks = Vec::new();
-    let (top_t, bottom_t) = (to_mesh(&top), to_mesh(&bottom));
-    for (name, mesh, genus) in [
+    let solid = [
         ("top", &top_t.mesh, genus_top),
         ("bottom", &bottom_t.mesh, genus_bottom),
-    ] {
-        for mut c in solid_checks_for(mesh, SolidSpec::boolean_result(genus)) {
+    ]
+    .par_iter()
+    .map(|&(name, mesh, genus)| {
+        let mut cs = solid_checks_for(mesh, SolidSpec::boolean_result(genus));
+        for c in &mut cs {
             c.detail = format!("mold-{name}: {}", c.detail);
-            checks.push(c);
         }
-    }
+        cs
+    })
+    .collect::<Vec<_>>();
+    checks.extend(solid.into_iter().flatten());
 
     progress.tick(1);
     progress.stage("mold volumes", 1);
     // §7.4 volumes. The voids are measured from the channel and key
-    // primitives, independently of the halves.
+    // primitives and the device, independently of the halves. Keys lie
+    // outside the outline (checked when they were placed), where the block
+    // above the parting surface is the top half before its channels.
     let (v_top, v_bottom) = (top_t.mesh.volume(), bottom_t.mesh.volume());
     let v_device = posed.mesh.volume();
     let v_block = (f.block_hi - f.block_lo).element_product();
@@ -346,38 +415,24 @@ pub fn build_mold(
 
     progress.tick(1);
     progress.stage("mold overlaps", 1);
-    // §7.5 overlaps, by complementarity: each half was made as X − device,
-    // so it overlaps the device by exactly V(half) + V(X ∩ device) − V(X),
-    // with X ∩ device a fresh boolean. (Intersecting the halves with the
-    // device directly costs 20 s at 120 lenses: they share every cavity face.)
-    // Measured on the exact differences; collapsing slivers afterwards moves
-    // faces by at most SLIVER_MM, shared faces alike in both halves.
-    // The halves come from the blocks above and below the parting surface,
-    // which overlap by V(above) + V(below) − V(block), and meet again only
-    // where a key bump is not inside its socket.
-    let (top_in_device, bottom_in_device) = rayon::join(
-        || checked("top block ∩ device", top_block.intersection(&dev)),
-        || checked("bottom block ∩ device", bottom_block.intersection(&dev)),
-    );
-    let (top_in_device, bottom_in_device) = (top_in_device?, bottom_in_device?);
+    // §7.5 overlaps. The halves before their channels and the device tile
+    // the block: their faces cancel in pairs, leaving the block's boundary
+    // (checked below, exactly). The halves are those minus channels and
+    // sockets, the bottom one with the key bumps added; so they can overlap
+    // only where a bump is not inside its socket, or a bump reaches the
+    // device.
+    checks.push(tiling::tiles_block(
+        &[&top_region.mesh, &bottom_region.mesh, &posed.mesh],
+        (f.block_lo, f.block_hi),
+    ));
     let bumps_out_of_sockets = checked(
         "key bumps outside their sockets",
         bumps.intersection(&above).difference(&sockets),
     )?;
+    let bumps_in_device = checked("key bumps in the device", bumps.intersection(&dev))?;
     let overlaps: Vec<(&str, f64)> = vec![
-        (
-            "top ∩ bottom",
-            (above_mesh.volume() + below_mesh.volume() - v_block).abs()
-                + bumps_out_of_sockets.volume(),
-        ),
-        (
-            "top ∩ device",
-            (top_exact.volume() + top_in_device.volume() - top_block.volume()).abs(),
-        ),
-        (
-            "bottom ∩ device",
-            (bottom_exact.volume() + bottom_in_device.volume() - bottom_block.volume()).abs(),
-        ),
+        ("top ∩ bottom", bumps_out_of_sockets.volume()),
+        ("bottom ∩ device", bumps_in_device.volume()),
     ];
     let worst = overlaps
         .iter()
@@ -391,6 +446,7 @@ pub fn build_mold(
         overlaps
             .iter()
             .map(|(n, v)| format!("{n}: {v:.3e}"))
+            .chain(["top ∩ device: none (tiling)".to_string()])
             .collect::<Vec<_>>()
             .join(", "),
     ));
@@ -399,7 +455,7 @@ pub fn build_mold(
     progress.stage("mold cavity checks", 1);
     // §7.6 the cavity is the device: faces traced back to the device lie on
     // their source triangles, and cover it but for the channel openings.
-    let mut worst_off = 0.0f64;
+    let (mut worst_off, mut worst_at) = (0.0f64, DVec3::ZERO);
     let mut cavity_area = 0.0;
     for traced in [&top_t, &bottom_t] {
         for (t, &(id, face)) in traced.mesh.triangles.iter().zip(&traced.source) {
@@ -414,8 +470,20 @@ pub fn build_mold(
             let [a, b, c] = src.map(|i| posed.mesh.positions[i as usize]);
             for &v in t {
                 let q = traced.mesh.positions[v as usize];
-                let off = (moirecast_kernel::measure::closest_on_triangle(q, a, b, c) - q).length();
-                worst_off = worst_off.max(off);
+                let mut off = distance_to(q, [a, b, c]);
+                if off > CAVITY_ON_DEVICE_MM {
+                    // The booleans may move a vertex within a plane of
+                    // several device triangles (a wall): measure against them all.
+                    off = posed
+                        .mesh
+                        .triangles
+                        .par_iter()
+                        .map(|t| distance_to(q, t.map(|i| posed.mesh.positions[i as usize])))
+                        .reduce(|| f64::INFINITY, f64::min);
+                }
+                if off > worst_off {
+                    (worst_off, worst_at) = (off, q);
+                }
             }
         }
     }
@@ -425,20 +493,31 @@ pub fn build_mold(
         worst_off,
         CAVITY_ON_DEVICE_MM,
         "mm",
-        "largest distance of a cavity-face vertex from the device triangle it came from".into(),
+        format!(
+            "largest distance of a cavity-face vertex from the device (from the triangle it came from, or the nearest if that is farther), at ({:.3}, {:.3}, {:.3})",
+            worst_at.x, worst_at.y, worst_at.z
+        ),
     ));
-    // An opening's area on the device exceeds its circle where the lenses
-    // ripple or the surface slopes under it; half as much again bounds that.
-    let openings: f64 = OPENING_SLACK
-        * std::f64::consts::PI
-        * (f.gate.radius.powi(2) + f.vents.iter().map(|v| v.radius.powi(2)).sum::<f64>());
+    // The device's surface inside the channels, from their own boolean with
+    // the device: the openings the cavity must lack, and nothing more.
+    let openings: f64 = {
+        let inside = to_mesh(&channels_in_device);
+        inside
+            .mesh
+            .triangles
+            .iter()
+            .zip(&inside.source)
+            .filter(|(_, &(id, _))| id == device_id)
+            .map(|(t, _)| inside.mesh.triangle_area(t))
+            .sum()
+    };
     checks.push(CheckResult::at_most(
         "cavity-covers-device",
-        (device_area - cavity_area) / device_area,
-        openings / device_area,
+        (device_area - cavity_area - openings).abs() / device_area,
+        COVER_REL,
         "of the device's area",
         format!(
-            "cavity faces {cavity_area:.4} mm² of the device's {device_area:.4} mm²; the gate and vent openings are at most {openings:.4} mm²"
+            "cavity faces {cavity_area:.6} mm² of the device's {device_area:.6} mm²; the device's surface inside the gate and vents is {openings:.6} mm²"
         ),
     ));
 

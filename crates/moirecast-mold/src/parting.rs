@@ -4,7 +4,7 @@
 
 use crate::error::{MoldError, Result};
 use glam::{DVec2, DVec3};
-use moirecast_kernel::mesher::Patch;
+use moirecast_kernel::mesher::{Patch, Side};
 use moirecast_kernel::model::LensRef;
 use moirecast_kernel::{Design, DeviceMesh, Mesh};
 use std::collections::HashMap;
@@ -107,11 +107,26 @@ pub enum Face {
     Wall(Wall),
 }
 
+/// Where a vertex of the posed device lies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Level {
+    /// On a face under the top half (its lenses or the walls' top edges).
+    Upper,
+    /// On a face over the bottom half.
+    Lower,
+    /// Halfway up a wall: the parting line, where the skirt starts.
+    Mid,
+}
+
 /// The device in the mold frame: rotated 180° about x if flipped, scaled by
-/// the shrink factor about its outline's centre.
+/// the shrink factor about its outline's centre, its walls split at
+/// mid-height (the parting line), so that each half's cavity is a set of
+/// the device's own triangles.
 pub struct PosedDevice {
     pub mesh: Mesh,
     pub faces: Vec<Face>,
+    /// Per vertex.
+    pub levels: Vec<Level>,
     /// The outline: the xy bounds of the posed device.
     pub outline: Rect,
     pub flip: bool,
@@ -131,36 +146,31 @@ impl PosedDevice {
             .iter()
             .map(|&p| crate::boolean::f32_exact(pose(centre, flip, scale, p)))
             .collect();
-        let mesh = Mesh {
+        let mut mesh = Mesh {
             positions,
             triangles: device.mesh.triangles.clone(),
         };
-        let faces = device
+        let mut faces = device
             .patches
             .iter()
             .zip(&mesh.triangles)
-            .map(|(patch, t)| match patch {
+            .map(|(patch, _)| match patch {
                 Patch::Lens(LensRef::Revealer(_)) if !flip => Ok(Face::Upper),
                 Patch::Lens(LensRef::Base(_)) if flip => Ok(Face::Upper),
                 Patch::Lens(_) => Ok(Face::Lower),
-                Patch::Wall(_) => {
-                    let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
-                    let n = (b - a).cross(c - a);
-                    let wall = if n.x.abs() > n.y.abs() {
-                        if n.x < 0.0 {
-                            Wall::XMin
-                        } else {
-                            Wall::XMax
-                        }
-                    } else if n.y < 0.0 {
-                        Wall::YMin
-                    } else {
-                        Wall::YMax
-                    };
-                    Ok(Face::Wall(wall))
-                }
+                // From the mesher's side, not the normal: a thin wall
+                // triangle's f32 normal can point anywhere (a random
+                // cylinder design put an x-max triangle on x-min).
+                // Flipping turns the device about x: y-sides swap.
+                Patch::Wall(side) => Ok(Face::Wall(match (side, flip) {
+                    (Side::Left, _) => Wall::XMin,
+                    (Side::Right, _) => Wall::XMax,
+                    (Side::Front, false) | (Side::Back, true) => Wall::YMin,
+                    (Side::Front, true) | (Side::Back, false) => Wall::YMax,
+                })),
             })
             .collect::<Result<Vec<_>>>()?;
+        let levels = split_walls(&mut mesh, &mut faces)?;
         // The exact outline, posed (vertices lie on it to the wall snap).
         let (a, b) = (
             pose(centre, flip, scale, DVec3::new(ox0, -hh, 0.0)),
@@ -179,6 +189,7 @@ impl PosedDevice {
         Ok(PosedDevice {
             mesh,
             faces,
+            levels,
             outline,
             flip,
             scale,
@@ -190,6 +201,79 @@ impl PosedDevice {
     pub fn pose(&self, p: DVec3) -> DVec3 {
         pose(self.centre, self.flip, self.scale, p)
     }
+}
+
+/// Splits every wall triangle at the midpoints of its two rungs (its edges
+/// from the wall's top edge to its bottom edge): three triangles, wound as
+/// the one they replace. Neighbours share a rung, so the split conforms, and
+/// the midpoints, in order along a wall, are the mid-wall curve. Returns
+/// each vertex's level.
+fn split_walls(mesh: &mut Mesh, faces: &mut Vec<Face>) -> Result<Vec<Level>> {
+    let n = mesh.positions.len();
+    let (mut on_upper, mut on_lower) = (vec![false; n], vec![false; n]);
+    for (t, face) in mesh.triangles.iter().zip(faces.iter()) {
+        let flags = match face {
+            Face::Upper => &mut on_upper,
+            Face::Lower => &mut on_lower,
+            Face::Wall(_) => continue,
+        };
+        for &v in t {
+            flags[v as usize] = true;
+        }
+    }
+    let mut levels = Vec::with_capacity(n);
+    for v in 0..n {
+        levels.push(match (on_upper[v], on_lower[v]) {
+            (true, false) => Level::Upper,
+            (false, true) => Level::Lower,
+            _ => {
+                return Err(MoldError::NotSolid {
+                    what: "device walls",
+                    detail: format!(
+                        "vertex {v} at {} is on {} lens faces",
+                        mesh.positions[v],
+                        if on_upper[v] { "both" } else { "no" }
+                    ),
+                })
+            }
+        });
+    }
+    let mut mid_of: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut mid = |mesh: &mut Mesh, levels: &mut Vec<Level>, a: u32, b: u32| -> u32 {
+        *mid_of.entry((a.min(b), a.max(b))).or_insert_with(|| {
+            let p = 0.5 * (mesh.positions[a as usize] + mesh.positions[b as usize]);
+            mesh.positions.push(crate::boolean::f32_exact(p));
+            levels.push(Level::Mid);
+            (mesh.positions.len() - 1) as u32
+        })
+    };
+    let (old_tris, old_faces) = (std::mem::take(&mut mesh.triangles), std::mem::take(faces));
+    for (t, face) in old_tris.into_iter().zip(old_faces) {
+        if !matches!(face, Face::Wall(_)) {
+            mesh.triangles.push(t);
+            faces.push(face);
+            continue;
+        }
+        // rotate to (p, q, x): p and q on one edge, x on the other
+        let level = |k: usize| levels[t[k] as usize];
+        let Some(k) = (0..3)
+            .find(|&k| level((k + 1) % 3) == level((k + 2) % 3) && level(k) != level((k + 1) % 3))
+        else {
+            return Err(MoldError::NotSolid {
+                what: "device walls",
+                detail: format!(
+                    "wall triangle {t:?} does not span from the top edge to the bottom edge"
+                ),
+            });
+        };
+        let (p, q, x) = (t[(k + 1) % 3], t[(k + 2) % 3], t[k]);
+        let (mp, mq) = (mid(mesh, &mut levels, p, x), mid(mesh, &mut levels, q, x));
+        for tri in [[p, q, mq], [p, mq, mp], [mp, mq, x]] {
+            mesh.triangles.push(tri);
+            faces.push(face);
+        }
+    }
+    Ok(levels)
 }
 
 fn pose(centre: DVec3, flip: bool, scale: f64, p: DVec3) -> DVec3 {
@@ -241,29 +325,23 @@ pub struct WallCurves {
     pub wall: Wall,
     pub upper: Polyline,
     pub lower: Polyline,
-    /// Halfway up the meshed wall: between the midpoints of the wall's rungs.
+    /// Halfway up the meshed wall: through the midpoints of its rungs (its
+    /// edges from the top edge to the bottom edge), which are vertices of
+    /// the split wall.
     pub mid: Polyline,
+    /// Those vertices' positions, in order along the wall, ends included.
+    pub mid_points: Vec<DVec3>,
 }
 
 /// The four walls' edge curves, read off the posed mesh.
 pub fn wall_curves(device: &PosedDevice) -> Result<Vec<WallCurves>> {
     let n = device.mesh.positions.len();
-    let (mut on_upper, mut on_lower) = (vec![false; n], vec![false; n]);
-    for (t, face) in device.mesh.triangles.iter().zip(&device.faces) {
-        let flags = match face {
-            Face::Upper => &mut on_upper,
-            Face::Lower => &mut on_lower,
-            Face::Wall(_) => continue,
-        };
-        for &v in t {
-            flags[v as usize] = true;
-        }
-    }
     let rect = device.outline;
     let mut curves: Vec<WallCurves> = Vec::new();
     for wall in Wall::ALL {
         let mut seen = vec![false; n];
-        let (mut upper, mut lower) = (Vec::new(), Vec::new());
+        let (mut upper, mut lower, mut mid) = (Vec::new(), Vec::new(), Vec::new());
+        let mut mid_points: Vec<DVec3> = Vec::new();
         for (t, face) in device.mesh.triangles.iter().zip(&device.faces) {
             if *face != Face::Wall(wall) {
                 continue;
@@ -274,123 +352,59 @@ pub fn wall_curves(device: &PosedDevice) -> Result<Vec<WallCurves>> {
                     continue;
                 }
                 let p = device.mesh.positions[v];
-                if on_upper[v] {
-                    upper.push((wall.along(p), p.z));
+                match device.levels[v] {
+                    Level::Upper => upper.push((wall.along(p), p.z)),
+                    Level::Lower => lower.push((wall.along(p), p.z)),
+                    Level::Mid => mid.push((wall.along(p), p.z)),
                 }
-                if on_lower[v] {
-                    lower.push((wall.along(p), p.z));
+                if device.levels[v] == Level::Mid {
+                    mid_points.push(p);
                 }
             }
         }
         let span = wall.span(&rect);
-        let upper = polyline(wall, upper, span)?;
-        let lower = polyline(wall, lower, span)?;
-        // The mid curve runs through the midpoints of the wall's rungs (its
-        // edges from the top edge to the bottom edge): it crosses every wall
-        // triangle along its mid-line, so the parting surface meets the wall
-        // without sliver triangles.
-        let mut rungs: Vec<(f64, f64)> = Vec::new();
-        for (t, face) in device.mesh.triangles.iter().zip(&device.faces) {
-            if *face != Face::Wall(wall) {
-                continue;
-            }
-            for k in 0..3 {
-                let (a, b) = (t[k] as usize, t[(k + 1) % 3] as usize);
-                if on_upper[a] && !on_lower[a] && on_lower[b] && !on_upper[b]
-                    || on_lower[a] && !on_upper[a] && on_upper[b] && !on_lower[b]
-                {
-                    let m = 0.5 * (device.mesh.positions[a] + device.mesh.positions[b]);
-                    rungs.push((wall.along(m), m.z));
-                }
-            }
-        }
-        let on_rungs = polyline(wall, rungs, span)?;
-        // The skirt's points lie between rungs, in the middle of a wall
-        // triangle's mid-line: clear of every wall edge, so no boolean
-        // vertex lands a rounding error away from one (inputs are snapped
-        // to f32, which would move a point that sat on a rung off it). The
-        // ends are the corners' vertical edges, which stay exact.
-        let n = on_rungs.t.len();
-        let mut between = Polyline::default();
-        for k in 0..n {
-            if k == 0 || k == n - 1 {
-                between.t.push(on_rungs.t[k]);
-                between.z.push(on_rungs.z[k]);
-            }
-            if k + 1 < n {
-                between.t.push(0.5 * (on_rungs.t[k] + on_rungs.t[k + 1]));
-                between.z.push(0.5 * (on_rungs.z[k] + on_rungs.z[k + 1]));
-            }
-        }
-        let mid = thinned(between, MIN_SKIRT_SPACING_MM);
+        mid_points.sort_by(|a, b| wall.along(*a).total_cmp(&wall.along(*b)));
         curves.push(WallCurves {
             wall,
-            upper,
-            lower,
-            mid,
+            upper: polyline(wall, upper, span)?,
+            lower: polyline(wall, lower, span)?,
+            mid: polyline(wall, mid, span)?,
+            mid_points,
         });
     }
-    // The corners: both walls meeting there share the corner's vertical edge,
-    // so their mid values agree; make them bit-identical.
+    // The corners: both walls meeting there share the corner's vertical
+    // edge and so its midpoint; check they agree.
     for (a, b, a_end, b_end) in [
         (0usize, 3usize, false, false), // y-min start, x-min start: (x0, y0)
         (0, 1, true, false),            // y-min end, x-max start: (x1, y0)
         (2, 1, true, true),             // y-max end, x-max end: (x1, y1)
         (2, 3, false, true),            // y-max start, x-min end: (x0, y1)
     ] {
-        let za = if a_end {
-            *curves[a].mid.z.last().unwrap()
-        } else {
-            curves[a].mid.z[0]
+        let end_z = |c: usize, end: bool| {
+            let z = &curves[c].mid.z;
+            if end {
+                z[z.len() - 1]
+            } else {
+                z[0]
+            }
         };
-        let zb = if b_end {
-            *curves[b].mid.z.last().unwrap()
-        } else {
-            curves[b].mid.z[0]
+        let end_p = |c: usize, end: bool| {
+            let m = &curves[c].mid_points;
+            if end {
+                m[m.len() - 1]
+            } else {
+                m[0]
+            }
         };
-        if (za - zb).abs() > 1e-6 {
+        let (za, zb) = (end_z(a, a_end), end_z(b, b_end));
+        if za != zb || end_p(a, a_end) != end_p(b, b_end) {
             return Err(MoldError::NotSolid {
                 what: "device walls",
                 detail: format!("mid-wall heights {za} and {zb} disagree at a corner"),
             });
         }
-        let z = 0.5 * (za + zb);
-        for (c, end) in [(a, a_end), (b, b_end)] {
-            let mid = &mut curves[c].mid.z;
-            let k = if end { mid.len() - 1 } else { 0 };
-            mid[k] = z;
-        }
     }
     Ok(curves)
-}
-
-/// Least spacing (mm) of the skirt's points along a wall. Rungs closer than
-/// this are skipped: between the points kept, the skirt still crosses the
-/// wall at mid-height, far from any wall vertex, and downstream tools
-/// (OpenSCAD, slicers) that weld nearby vertices see no near-duplicates.
-const MIN_SKIRT_SPACING_MM: f64 = 0.01;
-
-/// Drops points closer than `spacing` to the last point kept; the ends stay.
-fn thinned(p: Polyline, spacing: f64) -> Polyline {
-    let n = p.t.len();
-    let mut out = Polyline::default();
-    for k in 0..n {
-        let last = k == n - 1;
-        if let Some(&prev) = out.t.last() {
-            if p.t[k] - prev < spacing {
-                if !last {
-                    continue;
-                }
-                if out.t.len() > 1 {
-                    out.t.pop();
-                    out.z.pop();
-                }
-            }
-        }
-        out.t.push(p.t[k]);
-        out.z.push(p.z[k]);
-    }
-    out
 }
 
 /// How far a wall edge's ends may sit from the outline's corners: the
@@ -408,8 +422,11 @@ fn polyline(wall: Wall, mut pts: Vec<(f64, f64)>, span: (f64, f64)) -> Result<Po
     if pts.len() < 2 {
         return Err(bad("fewer than two edge vertices".into()));
     }
-    if pts.windows(2).any(|w| w[0].0 == w[1].0) {
-        return Err(bad("an edge is not a graph along the wall".into()));
+    if let Some(w) = pts.windows(2).find(|w| w[0].0 == w[1].0) {
+        return Err(bad(format!(
+            "an edge is not a graph along the wall: two points at {} (heights {} and {})",
+            w[0].0, w[0].1, w[1].1
+        )));
     }
     let (first, last) = (pts[0].0, pts[pts.len() - 1].0);
     if (first - span.0).abs() > EDGE_SPAN_SLACK_MM || (last - span.1).abs() > EDGE_SPAN_SLACK_MM {
@@ -547,6 +564,12 @@ impl SolidBuilder {
         }
     }
 
+    /// Adds triangle (a, c, b): a face of another solid, seen from outside it.
+    pub fn reversed(&mut self, a: DVec3, b: DVec3, c: DVec3) {
+        let (ia, ib, ic) = (self.vertex(a), self.vertex(b), self.vertex(c));
+        self.mesh.triangles.push([ia, ic, ib]);
+    }
+
     pub fn quad(&mut self, a: DVec3, b: DVec3, c: DVec3, d: DVec3, outward: DVec3) {
         self.triangle(a, b, c, outward);
         self.triangle(a, c, d, outward);
@@ -592,24 +615,45 @@ pub enum PartSide {
     Below,
 }
 
+/// What a parting region's floor is inside the outline.
+pub enum Floor<'a> {
+    /// Through the device's interior: the mid height between the device's
+    /// faces at the nodes of a grid of `cells`, zipped to the mid-wall
+    /// curves. Cut away with the device, this region gives the half
+    /// before its channels, as METHOD §6 states it: another tool rebuilds
+    /// the halves from it.
+    Grid {
+        interior_mid: &'a dyn Fn(DVec2) -> f64,
+        cells: (usize, usize),
+    },
+    /// The device's own faces on this side of the parting line, reversed:
+    /// the region is then the half before its channels, with no boolean.
+    Device(&'a PosedDevice),
+}
+
+/// A parting region: a closed solid, and which of its triangles are the
+/// device's (the first `device_faces.len()`, in that order).
+pub struct Region {
+    pub mesh: Mesh,
+    /// The device triangle each of the region's first triangles is, reversed.
+    pub device_faces: Vec<u32>,
+}
+
 /// The block's part on one side of the parting surface, as a closed solid
 /// over `footprint` (the block's), from the parting surface to `cap_z` (the
-/// block's top or bottom face). Both parts share the parting surface's
-/// vertices exactly, so together they tile the block.
+/// block's top or bottom face). Regions on the two sides share the parting
+/// surface's vertices exactly; the device's faces, the two regions with a
+/// device floor and the device tile the block.
 ///
 /// Outside the outline its floor is the skirt: each wall's mid curve carried
-/// horizontally outward, flat over the corners. Inside, the floor runs
-/// through the device's interior (`interior_mid`, the mid height between the
-/// device's faces at a grid of points) and is cut away with the device.
+/// horizontally outward, flat over the corners. Inside, it is `floor`.
 pub fn parting_region(
-    outline: &Rect,
     walls: &[WallCurves],
-    interior_mid: &dyn Fn(DVec2) -> f64,
-    cells: (usize, usize),
+    floor: Floor,
     footprint: &Rect,
     cap_z: f64,
     side: PartSide,
-) -> Mesh {
+) -> Region {
     // Outward from the region: through the parting surface, and through the cap.
     let (down, cap_out) = match side {
         PartSide::Above => (DVec3::NEG_Z, DVec3::Z),
@@ -618,15 +662,22 @@ pub fn parting_region(
     let top_z = cap_z;
     let mut b = SolidBuilder::default();
     let curve = |w: Wall| walls.iter().find(|c| c.wall == w).expect("four walls");
-    let on_wall = |w: Wall| -> Vec<DVec3> {
-        let c = curve(w);
-        c.mid
-            .t
-            .iter()
-            .zip(&c.mid.z)
-            .map(|(&t, &z)| w.point(outline, t, z))
-            .collect()
-    };
+    let on_wall = |w: Wall| -> &[DVec3] { &curve(w).mid_points };
+    // The device's faces first, so that they keep their indices.
+    let mut device_faces = Vec::new();
+    if let Floor::Device(device) = &floor {
+        let level = match side {
+            PartSide::Above => Level::Upper,
+            PartSide::Below => Level::Lower,
+        };
+        for (k, t) in device.mesh.triangles.iter().enumerate() {
+            if t.iter().any(|&v| device.levels[v as usize] == level) {
+                let [p, q, r] = t.map(|v| device.mesh.positions[v as usize]);
+                b.reversed(p, q, r);
+                device_faces.push(k as u32);
+            }
+        }
+    }
     let carried_out = |w: Wall, p: DVec3| -> DVec3 {
         match w {
             Wall::XMin => DVec3::new(footprint.x0, p.y, p.z),
@@ -644,92 +695,81 @@ pub fn parting_region(
         }
     }
     // Corner flats, at the height of the corner's mid point.
-    let corner_z = |w: Wall, end: bool| {
-        let c = &curve(w).mid;
+    let corner = |w: Wall, end: bool| {
+        let m = on_wall(w);
         if end {
-            *c.z.last().unwrap()
+            m[m.len() - 1]
         } else {
-            c.z[0]
+            m[0]
         }
     };
     let corners = [
-        (
-            outline.x0,
-            outline.y0,
-            footprint.x0,
-            footprint.y0,
-            corner_z(Wall::YMin, false),
-        ),
-        (
-            outline.x1,
-            outline.y0,
-            footprint.x1,
-            footprint.y0,
-            corner_z(Wall::YMin, true),
-        ),
-        (
-            outline.x1,
-            outline.y1,
-            footprint.x1,
-            footprint.y1,
-            corner_z(Wall::YMax, true),
-        ),
-        (
-            outline.x0,
-            outline.y1,
-            footprint.x0,
-            footprint.y1,
-            corner_z(Wall::YMax, false),
-        ),
+        (corner(Wall::YMin, false), footprint.x0, footprint.y0),
+        (corner(Wall::YMin, true), footprint.x1, footprint.y0),
+        (corner(Wall::YMax, true), footprint.x1, footprint.y1),
+        (corner(Wall::YMax, false), footprint.x0, footprint.y1),
     ];
-    for &(x, y, fx, fy, z) in &corners {
-        b.quad(
-            DVec3::new(x, y, z),
-            DVec3::new(fx, y, z),
-            DVec3::new(fx, fy, z),
-            DVec3::new(x, fy, z),
-            down,
-        );
-    }
-    // Interior grid (nodes strictly inside the outline) and the ring zipped
-    // between its border and the walls' mid curves.
-    let (nx, ny) = (cells.0.max(2), cells.1.max(2));
-    let gx: Vec<f64> = (1..nx)
-        .map(|i| outline.x0 + (outline.x1 - outline.x0) * i as f64 / nx as f64)
-        .collect();
-    let gy: Vec<f64> = (1..ny)
-        .map(|j| outline.y0 + (outline.y1 - outline.y0) * j as f64 / ny as f64)
-        .collect();
-    let node: Vec<Vec<DVec3>> = gy
-        .iter()
-        .map(|&y| {
-            gx.iter()
-                .map(|&x| DVec3::new(x, y, interior_mid(DVec2::new(x, y))))
-                .collect()
-        })
-        .collect();
-    for j in 0..gy.len() - 1 {
-        for i in 0..gx.len() - 1 {
-            b.quad(
-                node[j][i],
-                node[j][i + 1],
-                node[j + 1][i + 1],
-                node[j + 1][i],
-                down,
-            );
+    // A fan around a point off the square's centre: the keys stand in the
+    // middle of these squares, and a diagonal would run through two of a
+    // key's polygon vertices, leaving slivers in the booleans.
+    for &(c, fx, fy) in &corners {
+        let square = [
+            c,
+            DVec3::new(fx, c.y, c.z),
+            DVec3::new(fx, fy, c.z),
+            DVec3::new(c.x, fy, c.z),
+        ];
+        let hub = DVec3::new(c.x + 0.75 * (fx - c.x), 0.5 * (c.y + fy), c.z);
+        for k in 0..4 {
+            b.triangle(hub, square[k], square[(k + 1) % 4], down);
         }
     }
-    let (last_i, last_j) = (gx.len() - 1, gy.len() - 1);
-    let inner = |w: Wall| -> Vec<DVec3> {
-        match w {
-            Wall::YMin => node[0].clone(),
-            Wall::YMax => node[last_j].clone(),
-            Wall::XMin => node.iter().map(|r| r[0]).collect(),
-            Wall::XMax => node.iter().map(|r| r[last_i]).collect(),
+    if let Floor::Grid {
+        interior_mid,
+        cells,
+    } = floor
+    {
+        // Interior grid (nodes strictly inside the corners) and the ring
+        // zipped between its border and the walls' mid curves.
+        let (c0, c2) = (corners[0].0, corners[2].0);
+        let (nx, ny) = (cells.0.max(2), cells.1.max(2));
+        let gx: Vec<f64> = (1..nx)
+            .map(|i| c0.x + (c2.x - c0.x) * i as f64 / nx as f64)
+            .collect();
+        let gy: Vec<f64> = (1..ny)
+            .map(|j| c0.y + (c2.y - c0.y) * j as f64 / ny as f64)
+            .collect();
+        let node: Vec<Vec<DVec3>> = gy
+            .iter()
+            .map(|&y| {
+                gx.iter()
+                    .map(|&x| DVec3::new(x, y, interior_mid(DVec2::new(x, y))))
+                    .collect()
+            })
+            .collect();
+        for j in 0..gy.len() - 1 {
+            for i in 0..gx.len() - 1 {
+                b.quad(
+                    node[j][i],
+                    node[j][i + 1],
+                    node[j + 1][i + 1],
+                    node[j + 1][i],
+                    down,
+                );
+            }
         }
-    };
-    for w in Wall::ALL {
-        zip_strip(&mut b, &on_wall(w), &inner(w), |p| w.along(p), down);
+        let (last_i, last_j) = (gx.len() - 1, gy.len() - 1);
+        let inner = |w: Wall| -> Vec<DVec3> {
+            match w {
+                Wall::YMin => node[0].clone(),
+                Wall::YMax => node[last_j].clone(),
+                Wall::XMin => node.iter().map(|r| r[0]).collect(),
+                Wall::XMax => node.iter().map(|r| r[last_i]).collect(),
+            }
+        };
+        for w in Wall::ALL {
+            zip_strip(&mut b, on_wall(w), &inner(w), |p| w.along(p), down);
+        }
     }
     // Sides of the region, from the floor's border up to `top_z`, and the top.
     let border = |w: Wall| -> Vec<DVec3> {
@@ -741,33 +781,9 @@ pub fn parting_region(
             Wall::YMax => (corners[3], corners[2]),
             Wall::XMin => (corners[0], corners[3]),
         };
-        let start = match w {
-            Wall::XMin | Wall::XMax => DVec3::new(
-                if w == Wall::XMin {
-                    footprint.x0
-                } else {
-                    footprint.x1
-                },
-                footprint.y0,
-                c0.4,
-            ),
-            Wall::YMin | Wall::YMax => DVec3::new(
-                footprint.x0,
-                if w == Wall::YMin {
-                    footprint.y0
-                } else {
-                    footprint.y1
-                },
-                c0.4,
-            ),
-        };
-        let end = match w {
-            Wall::XMin | Wall::XMax => DVec3::new(start.x, footprint.y1, c1.4),
-            Wall::YMin | Wall::YMax => DVec3::new(footprint.x1, start.y, c1.4),
-        };
-        let mut pts = vec![start];
-        pts.extend(on_wall(w).into_iter().map(|p| carried_out(w, p)));
-        pts.push(end);
+        let mut pts = vec![DVec3::new(c0.1, c0.2, c0.0.z)];
+        pts.extend(on_wall(w).iter().map(|&p| carried_out(w, p)));
+        pts.push(DVec3::new(c1.1, c1.2, c1.0.z));
         pts
     };
     let mut top_ring: Vec<DVec3> = Vec::new();
@@ -800,5 +816,8 @@ pub fn parting_region(
         let (p, q) = (top_ring[k], top_ring[(k + 1) % top_ring.len()]);
         b.triangle(c, p, q, cap_out);
     }
-    b.mesh
+    Region {
+        mesh: b.mesh,
+        device_faces,
+    }
 }

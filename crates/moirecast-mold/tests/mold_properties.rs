@@ -1,0 +1,45 @@
+//! Property tests of the mold on random designs: every design either gets a
+//! mold whose every check passes (METHOD §7: solids, volumes, the exact
+//! tiling, no overlaps, the cavity on the device, demoulding and filling),
+//! or is refused for a named misfit. Never a broken solid or a failed
+//! boolean.
+
+use moirecast_kernel::mesher::mesh_device;
+use moirecast_kernel::progress::Silent;
+use moirecast_kernel::strategies::design_strategy;
+use moirecast_kernel::Design;
+use moirecast_mold::{build_mold, MoldError, MoldParams};
+use proptest::prelude::*;
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_designs_get_a_correct_mold_or_a_clear_refusal(
+        design in design_strategy(),
+        lenses in 12usize..20,
+        height in 8.0..12.0f64,
+        flip in any::<bool>(),
+    ) {
+        // devices large enough for the default gate and keys
+        let Some(design) = design else { return Ok(()) };
+        let mut p = design.params.clone();
+        p.width = lenses as f64 * p.period;
+        p.height = height;
+        let Ok(design) = Design::new(p) else { return Ok(()) };
+        let device = mesh_device(&design, &Silent).unwrap();
+        let params = MoldParams { flip, ..MoldParams::default() };
+        match build_mold(&design, &device, &params, &Silent) {
+            Ok(mold) => {
+                for c in &mold.checks {
+                    prop_assert!(c.passed, "{}: {} against {} ({})", c.name, c.value, c.limit, c.detail);
+                }
+                prop_assert!(mold.checks.iter().any(|c| c.name == "mold-parts-tile-block"));
+            }
+            Err(e @ MoldError::DoesNotFit { .. }) => {
+                prop_assert!(!e.to_string().is_empty());
+            }
+            Err(e) => prop_assert!(false, "{e}"),
+        }
+    }
+}
