@@ -564,10 +564,10 @@ impl SolidBuilder {
         }
     }
 
-    /// Adds triangle (a, c, b): a face of another solid, seen from outside it.
-    pub fn reversed(&mut self, a: DVec3, b: DVec3, c: DVec3) {
-        let (ia, ib, ic) = (self.vertex(a), self.vertex(b), self.vertex(c));
-        self.mesh.triangles.push([ia, ic, ib]);
+    /// A vertex no other call will share: one the caller indexes itself.
+    pub fn unshared_vertex(&mut self, p: DVec3) -> u32 {
+        self.mesh.positions.push(crate::boolean::f32_exact(p));
+        (self.mesh.positions.len() - 1) as u32
     }
 
     pub fn quad(&mut self, a: DVec3, b: DVec3, c: DVec3, d: DVec3, outward: DVec3) {
@@ -670,12 +670,26 @@ pub fn parting_region(
             PartSide::Above => Level::Upper,
             PartSide::Below => Level::Lower,
         };
+        // Device vertices map by index; only the mid-wall ones, which the
+        // skirt shares, go through the builder's position index.
+        let mut index = vec![u32::MAX; device.mesh.positions.len()];
         for (k, t) in device.mesh.triangles.iter().enumerate() {
-            if t.iter().any(|&v| device.levels[v as usize] == level) {
-                let [p, q, r] = t.map(|v| device.mesh.positions[v as usize]);
-                b.reversed(p, q, r);
-                device_faces.push(k as u32);
+            if !t.iter().any(|&v| device.levels[v as usize] == level) {
+                continue;
             }
+            let [p, q, r] = t.map(|v| {
+                let v = v as usize;
+                if index[v] == u32::MAX {
+                    let at = device.mesh.positions[v];
+                    index[v] = match device.levels[v] {
+                        Level::Mid => b.vertex(at),
+                        _ => b.unshared_vertex(at),
+                    };
+                }
+                index[v]
+            });
+            b.mesh.triangles.push([p, r, q]);
+            device_faces.push(k as u32);
         }
     }
     let carried_out = |w: Wall, p: DVec3| -> DVec3 {

@@ -11,7 +11,6 @@ use glam::DVec3;
 use moirecast_kernel::check::CheckResult;
 use moirecast_kernel::Mesh;
 use rayon::prelude::*;
-use std::collections::HashMap;
 
 /// Area (relative to the block's surface) the uncovered or doubly covered
 /// boundary may have: the sum of many triangles' areas rounds.
@@ -19,23 +18,31 @@ const AREA_REL: f64 = 1e-9;
 
 /// Whether `parts` tile the box `block` (lowest, highest corner).
 pub fn tiles_block(parts: &[&Mesh], block: (DVec3, DVec3)) -> CheckResult {
-    // One index per distinct position across all parts.
-    let mut index: HashMap<[u64; 3], u32> = HashMap::new();
-    let mut positions: Vec<DVec3> = Vec::new();
-    let mut faces: Vec<([u32; 3], i32)> = Vec::new();
-    for mesh in parts {
-        let ids: Vec<u32> = mesh
-            .positions
-            .iter()
-            .map(|p| {
-                *index
-                    .entry(p.to_array().map(|c| (c + 0.0).to_bits()))
-                    .or_insert_with(|| {
-                        positions.push(*p);
-                        (positions.len() - 1) as u32
-                    })
+    // One index per distinct position across all parts: sort them all.
+    let mut keyed: Vec<([u64; 3], u32, u32)> = parts
+        .iter()
+        .enumerate()
+        .flat_map(|(k, m)| {
+            m.positions.iter().enumerate().map(move |(i, p)| {
+                (
+                    p.to_array().map(|c| (c + 0.0).to_bits()),
+                    k as u32,
+                    i as u32,
+                )
             })
-            .collect();
+        })
+        .collect();
+    keyed.par_sort_unstable();
+    let mut ids: Vec<Vec<u32>> = parts.iter().map(|m| vec![0; m.positions.len()]).collect();
+    let mut positions: Vec<DVec3> = Vec::new();
+    for (k, &(key, part, local)) in keyed.iter().enumerate() {
+        if k == 0 || keyed[k - 1].0 != key {
+            positions.push(DVec3::from_array(key.map(f64::from_bits)));
+        }
+        ids[part as usize][local as usize] = (positions.len() - 1) as u32;
+    }
+    let mut faces: Vec<([u32; 3], i32)> = Vec::new();
+    for (mesh, ids) in parts.iter().zip(&ids) {
         faces.par_extend(mesh.triangles.par_iter().map(|t| {
             // (m, x, y) from the smallest vertex; (m, y, x) is its reverse
             let t = t.map(|v| ids[v as usize]);
