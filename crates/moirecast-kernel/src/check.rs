@@ -275,7 +275,7 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
 
 /// The smallest altitude of a triangle (mm; 0 for a collapsed one) and the
 /// first triangle that has it.
-pub fn smallest_altitude(mesh: &Mesh) -> (f64, usize) {
+fn smallest_altitude(mesh: &Mesh) -> (f64, usize) {
     mesh.triangles
         .par_iter()
         .enumerate()
@@ -305,7 +305,7 @@ pub fn smallest_altitude(mesh: &Mesh) -> (f64, usize) {
 /// that collapse or flip, and vertices that land on another vertex's f32
 /// point (a reader that welds an STL by position, as trimesh and slicers
 /// do, would join them).
-pub fn f32_rounding_faults(mesh: &Mesh) -> (usize, usize) {
+fn f32_rounding_faults(mesh: &Mesh) -> (usize, usize) {
     let flipped = mesh
         .triangles
         .par_iter()

@@ -22,9 +22,7 @@ use boolean::{
 };
 use glam::{DVec2, DVec3};
 use manifold_rust::manifold::Manifold;
-use moirecast_kernel::check::{
-    self, solid_checks_for, solid_checks_of_genus, CheckResult, SolidSpec,
-};
+use moirecast_kernel::check::{solid_checks_for, solid_checks_of_genus, CheckResult, SolidSpec};
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{Design, DeviceMesh, Mesh};
 use parting::{Face, Floor, HeightQuery, PartSide, PosedDevice, Region};
@@ -102,14 +100,21 @@ pub struct ConstructionSolid {
     pub shells: u32,
 }
 
-/// A half, checked, with its mesh; if the channels left slivers (edges
-/// shorter than `SLIVER_MM`, needles thinner than the solid checks allow,
-/// or triangles and vertices that rounding to f32 would break) where they cross the device's faces at a shallow angle,
-/// they are collapsed first (manifold's `simplify`; it
+/// A half, checked, with its mesh and its solid checks (genus `genus`). If
+/// the channels left slivers where they cross the device's faces at a
+/// shallow angle (edges shorter than `SLIVER_MM`, or triangles and vertices
+/// the solid checks reject: needles, f32 rounding faults), they are
+/// collapsed first and the half checked again (manifold's `simplify`; it
 /// costs a pass over the whole half, so it runs only when needed).
-fn sliver_free(what: &str, half: Manifold) -> Result<boolean::Traced> {
+fn sliver_free(
+    what: &str,
+    half: Manifold,
+    genus: u32,
+) -> Result<(boolean::Traced, Vec<CheckResult>)> {
     let half = checked(what, half)?;
+    let spec = SolidSpec::boolean_result(genus);
     let mesh = to_mesh(&half);
+    let checks = solid_checks_for(&mesh.mesh, spec);
     let m = &mesh.mesh;
     let shortest = m
         .triangles
@@ -117,17 +122,24 @@ fn sliver_free(what: &str, half: Manifold) -> Result<boolean::Traced> {
         .flat_map_iter(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
         .map(|(a, b)| m.positions[a as usize].distance(m.positions[b as usize]))
         .reduce(|| f64::INFINITY, f64::min);
-    if shortest >= SLIVER_MM
-        && check::smallest_altitude(m).0 >= check::MIN_BOOLEAN_ALTITUDE_MM
-        && check::f32_rounding_faults(m) == (0, 0)
-    {
-        return Ok(mesh);
+    const SLIVER_CHECKS: [&str; 3] = [
+        "no-degenerate-triangles",
+        "f32-safe-triangles",
+        "f32-distinct-vertices",
+    ];
+    let slivers = checks
+        .iter()
+        .any(|c| !c.passed && SLIVER_CHECKS.contains(&c.name));
+    if shortest >= SLIVER_MM && !slivers {
+        return Ok((mesh, checks));
     }
     let half = checked(
         format!("{what}, slivers collapsed"),
         half.simplify(SLIVER_MM),
     )?;
-    Ok(to_mesh(&half))
+    let mesh = to_mesh(&half);
+    let checks = solid_checks_for(&mesh.mesh, spec);
+    Ok((mesh, checks))
 }
 
 /// Distance from `q` to the triangle `corners`.
@@ -344,6 +356,8 @@ pub fn build_mold(
     let top_cut = checked("channels and sockets", channels.union(&sockets))?;
     // Three chains of about equal work on two cores: the top half, the
     // device's import (for the volumes below), and the bottom half.
+    let genus_top = 1 + f.vents.len() as u32 + f.bolts.len() as u32;
+    let genus_bottom = f.bolts.len() as u32;
     let device_id = Manifold::reserve_ids(1);
     let import = |what: &str, r: &Region| {
         boolean::to_region_manifold(what, &r.mesh, &r.device_faces, device_id)
@@ -353,37 +367,31 @@ pub fn build_mold(
             rayon::join(
                 || {
                     let top = import("top half before its channels", &top_region)?;
-                    sliver_free("top half", top.difference(&top_cut))
+                    sliver_free("top half", top.difference(&top_cut), genus_top)
                 },
                 || boolean::to_traced_manifold("device", &posed.mesh, device_id),
             )
         },
         || {
             let bottom = import("bottom half before its channels", &bottom_region)?;
-            sliver_free("bottom half", bottom.union(&bumps).difference(&channels))
+            sliver_free(
+                "bottom half",
+                bottom.union(&bumps).difference(&channels),
+                genus_bottom,
+            )
         },
     );
-    let (top_t, bottom_t, dev) = (top_t?, bottom_t?, dev?);
+    let ((top_t, top_checks), (bottom_t, bottom_checks), dev) = (top_t?, bottom_t?, dev?);
     progress.tick(1);
 
     progress.stage("mold solid checks", 1);
-    let genus_top = 1 + f.vents.len() as u32 + f.bolts.len() as u32;
-    let genus_bottom = f.bolts.len() as u32;
     let mut checks = Vec::new();
-    let solid = [
-        ("top", &top_t.mesh, genus_top),
-        ("bottom", &bottom_t.mesh, genus_bottom),
-    ]
-    .par_iter()
-    .map(|&(name, mesh, genus)| {
-        let mut cs = solid_checks_for(mesh, SolidSpec::boolean_result(genus));
-        for c in &mut cs {
+    for (name, cs) in [("top", top_checks), ("bottom", bottom_checks)] {
+        for mut c in cs {
             c.detail = format!("mold-{name}: {}", c.detail);
+            checks.push(c);
         }
-        cs
-    })
-    .collect::<Vec<_>>();
-    checks.extend(solid.into_iter().flatten());
+    }
 
     progress.tick(1);
     progress.stage("mold volumes", 1);

@@ -153,23 +153,22 @@ impl PosedDevice {
         let mut faces = device
             .patches
             .iter()
-            .zip(&mesh.triangles)
-            .map(|(patch, _)| match patch {
-                Patch::Lens(LensRef::Revealer(_)) if !flip => Ok(Face::Upper),
-                Patch::Lens(LensRef::Base(_)) if flip => Ok(Face::Upper),
-                Patch::Lens(_) => Ok(Face::Lower),
+            .map(|patch| match patch {
+                Patch::Lens(LensRef::Revealer(_)) if !flip => Face::Upper,
+                Patch::Lens(LensRef::Base(_)) if flip => Face::Upper,
+                Patch::Lens(_) => Face::Lower,
                 // From the mesher's side, not the normal: a thin wall
                 // triangle's f32 normal can point anywhere (a random
                 // cylinder design put an x-max triangle on x-min).
                 // Flipping turns the device about x: y-sides swap.
-                Patch::Wall(side) => Ok(Face::Wall(match (side, flip) {
+                Patch::Wall(side) => Face::Wall(match (side, flip) {
                     (Side::Left, _) => Wall::XMin,
                     (Side::Right, _) => Wall::XMax,
                     (Side::Front, false) | (Side::Back, true) => Wall::YMin,
                     (Side::Front, true) | (Side::Back, false) => Wall::YMax,
-                })),
+                }),
             })
-            .collect::<Result<Vec<_>>>()?;
+            .collect();
         let levels = split_walls(&mut mesh, &mut faces)?;
         // The exact outline, posed (vertices lie on it to the wall snap).
         let (a, b) = (
