@@ -142,6 +142,37 @@ fn sliver_free(
     Ok((mesh, checks))
 }
 
+/// The bottom and top rings of a vertical key frustum over `centre`, as
+/// the bottom region builds its bump from them: vertex k of each on the
+/// same side edge, counter-clockwise seen from above.
+fn frustum_rings(centre: DVec2, frustum: &Manifold) -> parting::Bump {
+    let mesh = to_mesh(frustum).mesh;
+    let (z0, z1) = mesh
+        .positions
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.z), hi.max(p.z))
+        });
+    let ring = |z: f64| {
+        let mut r: Vec<DVec3> = mesh
+            .positions
+            .iter()
+            .copied()
+            .filter(|p| p.z == z && p.truncate().distance(centre) > 1e-9)
+            .collect();
+        r.sort_by(|a, b| {
+            let angle = |p: &DVec3| (p.y - centre.y).atan2(p.x - centre.x);
+            angle(a).total_cmp(&angle(b))
+        });
+        r
+    };
+    parting::Bump {
+        centre,
+        bottom: ring(z0),
+        top: ring(z1),
+    }
+}
+
 /// Distance from `q` to the triangle `corners`.
 fn distance_to(q: DVec3, [a, b, c]: [DVec3; 3]) -> f64 {
     (moirecast_kernel::measure::closest_on_triangle(q, a, b, c) - q).length()
@@ -234,13 +265,43 @@ pub fn build_mold(
         _ => f64::NAN,
     };
     let footprint = features::block_rect(&f);
-    let region = |floor: Floor, side: PartSide| -> Result<Region> {
+    // The keys: a tapered bump on the bottom half, in a socket with
+    // clearance in the top half.
+    let tan = p.key_taper_deg.to_radians().tan();
+    let (h, c) = (p.key_height, p.key_clearance);
+    let r_low = p.key_diameter / 2.0 + 0.5 * h * tan;
+    let mut bump_solids = Vec::new();
+    let mut sockets = Vec::new();
+    for k in &f.keys {
+        let (xy, z) = (k.at.truncate(), k.at.z);
+        bump_solids.push(vertical_frustum(
+            xy,
+            z - 0.5 * h,
+            z + h,
+            r_low,
+            r_low - 1.5 * h * tan,
+        )?);
+        sockets.push(vertical_frustum(
+            xy,
+            z - 0.5 * h,
+            z + h + c,
+            r_low + c,
+            r_low + c - (1.5 * h + c) * tan,
+        )?);
+    }
+    let bump_rings: Vec<parting::Bump> = f
+        .keys
+        .iter()
+        .zip(&bump_solids)
+        .map(|(k, solid)| frustum_rings(k.at.truncate(), solid))
+        .collect();
+    let region = |floor: Floor, side: PartSide, bumps: &[parting::Bump]| -> Result<Region> {
         let cap_z = match side {
             PartSide::Above => f.block_hi.z,
             PartSide::Below => f.block_lo.z,
         };
         let grid = matches!(floor, Floor::Grid { .. });
-        let r = parting::parting_region(&walls, floor, &footprint, cap_z, side);
+        let r = parting::parting_region(&walls, floor, &footprint, cap_z, side, bumps);
         if let Some(c) = solid_checks_of_genus(&r.mesh, 0)
             .into_iter()
             .find(|c| !c.passed)
@@ -261,23 +322,29 @@ pub fn build_mold(
         cells,
     };
     // The halves before their channels: the device's own faces, walls
-    // split at the parting line, and the skirt. The regions over the grid
-    // are what another tool rebuilds them from (block side minus device).
-    let ((top_region, bottom_region), (above_mesh, below_mesh)) = rayon::join(
+    // split at the parting line, and the skirt, the bottom one with the
+    // key bumps (and without, for the tiling check). The regions over the
+    // grid are what another tool rebuilds them from (block side minus device).
+    let ((top_region, (bottom_region, bottom_plain)), (above_mesh, below_mesh)) = rayon::join(
         || {
             rayon::join(
-                || region(Floor::Device(&posed), PartSide::Above),
-                || region(Floor::Device(&posed), PartSide::Below),
+                || region(Floor::Device(&posed), PartSide::Above, &[]),
+                || {
+                    (
+                        region(Floor::Device(&posed), PartSide::Below, &bump_rings),
+                        region(Floor::Device(&posed), PartSide::Below, &[]),
+                    )
+                },
             )
         },
         || {
             (
-                region(grid(), PartSide::Above).map(|r| r.mesh),
-                region(grid(), PartSide::Below).map(|r| r.mesh),
+                region(grid(), PartSide::Above, &[]).map(|r| r.mesh),
+                region(grid(), PartSide::Below, &[]).map(|r| r.mesh),
             )
         },
     );
-    let (top_region, bottom_region) = (top_region?, bottom_region?);
+    let (top_region, bottom_region, bottom_plain) = (top_region?, bottom_region?, bottom_plain?);
     let (above_mesh, below_mesh) = (above_mesh?, below_mesh?);
     progress.tick(1);
 
@@ -328,29 +395,7 @@ pub fn build_mold(
             })
             .collect::<Result<_>>()?,
     )?;
-    let tan = p.key_taper_deg.to_radians().tan();
-    let (h, c) = (p.key_height, p.key_clearance);
-    let r_low = p.key_diameter / 2.0 + 0.5 * h * tan;
-    let mut bumps = Vec::new();
-    let mut sockets = Vec::new();
-    for k in &f.keys {
-        let (xy, z) = (k.at.truncate(), k.at.z);
-        bumps.push(vertical_frustum(
-            xy,
-            z - 0.5 * h,
-            z + h,
-            r_low,
-            r_low - 1.5 * h * tan,
-        )?);
-        sockets.push(vertical_frustum(
-            xy,
-            z - 0.5 * h,
-            z + h + c,
-            r_low + c,
-            r_low + c - (1.5 * h + c) * tan,
-        )?);
-    }
-    let bumps = union_all("key bumps", bumps)?;
+    let bumps = union_all("key bumps", bump_solids)?;
     let sockets = union_all("key sockets", sockets)?;
     let channels = checked("channels", fill.union(&bolts))?;
     let top_cut = checked("channels and sockets", channels.union(&sockets))?;
@@ -374,11 +419,7 @@ pub fn build_mold(
         },
         || {
             let bottom = import("bottom half before its channels", &bottom_region)?;
-            sliver_free(
-                "bottom half",
-                bottom.union(&bumps).difference(&channels),
-                genus_bottom,
-            )
+            sliver_free("bottom half", bottom.difference(&channels), genus_bottom)
         },
     );
     let ((top_t, top_checks), (bottom_t, bottom_checks), dev) = (top_t?, bottom_t?, dev?);
@@ -430,7 +471,7 @@ pub fn build_mold(
     // only where a bump is not inside its socket, or a bump reaches the
     // device.
     checks.push(tiling::tiles_block(
-        &[&top_region.mesh, &bottom_region.mesh, &posed.mesh],
+        &[&top_region.mesh, &bottom_plain.mesh, &posed.mesh],
         (f.block_lo, f.block_hi),
     ));
     let bumps_out_of_sockets = checked(

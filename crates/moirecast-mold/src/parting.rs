@@ -630,6 +630,84 @@ pub enum Floor<'a> {
     Device(&'a PosedDevice),
 }
 
+/// A registration key's bump, built into the bottom half's region (which
+/// saves a boolean pass over the whole half): the part of its frustum above
+/// the corner square's plane. `bottom` and `top` are the frustum's rings,
+/// vertex k of one over vertex k of the other, counter-clockwise seen from
+/// above.
+pub struct Bump {
+    pub centre: DVec2,
+    pub bottom: Vec<DVec3>,
+    pub top: Vec<DVec3>,
+}
+
+impl Bump {
+    /// Where the frustum's side edges cross the plane `z`.
+    fn foot(&self, z: f64) -> Vec<DVec3> {
+        self.bottom
+            .iter()
+            .zip(&self.top)
+            .map(|(&a, &b)| {
+                let s = (z - a.z) / (b.z - a.z);
+                (a + s * (b - a)).truncate().extend(z)
+            })
+            .collect()
+    }
+
+    /// Whether the bump stands in the axis-aligned square with corners `a`, `b`.
+    fn in_square(&self, a: DVec3, b: DVec3) -> bool {
+        let (lo, hi) = (
+            a.truncate().min(b.truncate()),
+            a.truncate().max(b.truncate()),
+        );
+        self.centre.cmpgt(lo).all() && self.centre.cmplt(hi).all()
+    }
+}
+
+/// The corner square `square` with the foot of `bump` cut out of it, and
+/// the bump's side and top. The square is fanned from each corner to the
+/// stretch of the foot ring facing it, and closed along each side by a
+/// triangle to the ring vertex facing that side's middle; the foot lies
+/// within the square's inscribed circle (the keys' placement checks that),
+/// so every corner sees its stretch of the ring.
+fn square_with_bump(b: &mut SolidBuilder, square: [DVec3; 4], bump: &Bump, down: DVec3) {
+    let c = bump.centre;
+    let angle = |p: DVec3| (p.y - c.y).atan2(p.x - c.x);
+    let mut sq = square;
+    sq.sort_by(|p, q| angle(*p).total_cmp(&angle(*q)));
+    let ring = bump.foot(square[0].z);
+    let n = ring.len();
+    // per side of the square, the ring vertex facing its middle
+    let facing: Vec<usize> = (0..4)
+        .map(|i| {
+            let mid = 0.5 * (sq[i] + sq[(i + 1) % 4]).truncate() - c;
+            (0..n)
+                .max_by(|&j, &k| {
+                    let d = |v: usize| (ring[v].truncate() - c).normalize().dot(mid.normalize());
+                    d(j).total_cmp(&d(k))
+                })
+                .expect("a ring")
+        })
+        .collect();
+    for i in 0..4 {
+        let (corner, next) = (sq[(i + 1) % 4], facing[(i + 1) % 4]);
+        b.triangle(sq[i], corner, ring[facing[i]], down);
+        let mut k = facing[i];
+        while k != next {
+            b.triangle(corner, ring[k], ring[(k + 1) % n], down);
+            k = (k + 1) % n;
+        }
+    }
+    let up = DVec3::Z;
+    for k in 0..n {
+        let (p, q) = (ring[k], ring[(k + 1) % n]);
+        let (pt, qt) = (bump.top[k], bump.top[(k + 1) % n]);
+        let out = (0.5 * (p + q).truncate() - c).extend(0.0);
+        b.quad(p, q, qt, pt, out);
+        b.triangle(c.extend(pt.z), pt, qt, up);
+    }
+}
+
 /// A parting region: a closed solid, and which of its triangles are the
 /// device's (the first `device_faces.len()`, in that order).
 pub struct Region {
@@ -646,12 +724,15 @@ pub struct Region {
 ///
 /// Outside the outline its floor is the skirt: each wall's mid curve carried
 /// horizontally outward, flat over the corners. Inside, it is `floor`.
+/// Each of `bumps` stands on the corner square it is in (the bottom half's
+/// registration keys); the tiling holds only without them.
 pub fn parting_region(
     walls: &[WallCurves],
     floor: Floor,
     footprint: &Rect,
     cap_z: f64,
     side: PartSide,
+    bumps: &[Bump],
 ) -> Region {
     // Outward from the region: through the parting surface, and through the cap.
     let (down, cap_out) = match side {
@@ -732,6 +813,10 @@ pub fn parting_region(
             DVec3::new(fx, fy, c.z),
             DVec3::new(c.x, fy, c.z),
         ];
+        if let Some(bump) = bumps.iter().find(|k| k.in_square(square[0], square[2])) {
+            square_with_bump(&mut b, square, bump, down);
+            continue;
+        }
         let hub = DVec3::new(c.x + 0.75 * (fx - c.x), 0.5 * (c.y + fy), c.z);
         for k in 0..4 {
             b.triangle(hub, square[k], square[(k + 1) % 4], down);
@@ -832,5 +917,62 @@ pub fn parting_region(
     Region {
         mesh: b.mesh,
         device_faces,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A key bump on a corner square, closed below by a 1 mm box: a closed
+    /// solid of genus 0 whose volume is the box's plus the frustum's part
+    /// above the square (the frustum of two similar polygons:
+    /// h/3·(A₀ + A₁ + √(A₀A₁))).
+    #[test]
+    fn a_bump_stands_on_its_corner_square_as_a_closed_solid() {
+        let (n, centre) = (48, DVec2::new(10.0, 20.0));
+        let ring = |r: f64, z: f64| -> Vec<DVec3> {
+            (0..n)
+                .map(|k| {
+                    let a = (k as f64 + 0.5) * std::f64::consts::TAU / n as f64;
+                    (centre + r * DVec2::new(a.cos(), a.sin())).extend(z)
+                })
+                .collect()
+        };
+        let bump = Bump {
+            centre,
+            bottom: ring(2.0, -1.0),
+            top: ring(1.5, 2.0),
+        };
+        let (lo, hi) = (centre - 3.0, centre + 3.0);
+        let at = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
+        let square = [
+            at(lo.x, lo.y, 0.0),
+            at(hi.x, lo.y, 0.0),
+            at(hi.x, hi.y, 0.0),
+            at(lo.x, hi.y, 0.0),
+        ];
+        let mut b = SolidBuilder::default();
+        square_with_bump(&mut b, square, &bump, DVec3::Z);
+        let below = square.map(|p| p - DVec3::Z);
+        for k in 0..4 {
+            let (p, q) = (square[k], square[(k + 1) % 4]);
+            let out = (0.5 * (p + q).truncate() - centre).extend(0.0);
+            b.quad(p, q, below[(k + 1) % 4], below[k], out);
+        }
+        b.quad(below[0], below[1], below[2], below[3], DVec3::NEG_Z);
+        for c in moirecast_kernel::check::solid_checks_for(
+            &b.mesh,
+            moirecast_kernel::check::SolidSpec::boolean_result(0),
+        ) {
+            assert!(c.passed, "{}: {} ({})", c.name, c.value, c.detail);
+        }
+        let polygon = |r: f64| 0.5 * n as f64 * r * r * (std::f64::consts::TAU / n as f64).sin();
+        // radius at the square's plane, a third of the way up the frustum
+        let (a0, a1) = (polygon(2.0 - 0.5 / 3.0 * 1.0), polygon(1.5));
+        let frustum = 2.0 / 3.0 * (a0 + a1 + (a0 * a1).sqrt());
+        let want = 36.0 + frustum;
+        let got = b.mesh.volume();
+        assert!((got - want).abs() < 1e-5 * want, "{got} vs {want}");
     }
 }
