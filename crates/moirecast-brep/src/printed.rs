@@ -202,8 +202,13 @@ pub fn build_printed_brep(
         faces: &bodies.black_faces,
         vertices: &bodies.black_vertices,
     };
-    let (clear_shells, clear_counts) = body_shells(&surfaces, dm, &clear)?;
-    let (black_shells, black_counts) = body_shells(&surfaces, dm, &black)?;
+    // the two bodies share only the lens surfaces: built side by side
+    let (clear_shells, black_shells) = rayon::join(
+        || body_shells(&surfaces, dm, &clear),
+        || body_shells(&surfaces, dm, &black),
+    );
+    let ((clear_shells, clear_counts), (black_shells, black_counts)) =
+        (clear_shells?, black_shells?);
     let closed = |shell: &Shell, what: &str| {
         let condition = shell.shell_condition();
         if condition == ShellCondition::Closed {
