@@ -196,13 +196,16 @@ pub fn lens_families(
     let margin = MARGIN_PERIODS * design.params.period;
     let fit = FIT_SHARE * tolerance.mm();
     let family = |array: Array| -> Result<LensFamily, BrepError> {
-        let of: Vec<(&(u8, i64), &(f64, f64))> =
-            ranges.iter().filter(|(k, _)| k.0 == array as u8).collect();
-        let lenses: Vec<i64> = of.iter().map(|(k, _)| k.1).collect();
-        let lo = of.iter().map(|(_, r)| r.0).fold(f64::INFINITY, f64::min) - margin;
-        let hi = of
+        // the array's lenses and the station range they span
+        let (lenses, stations): (Vec<i64>, Vec<(f64, f64)>) = ranges
             .iter()
-            .map(|(_, r)| r.1)
+            .filter(|(k, _)| k.0 == array as u8)
+            .map(|(k, r)| (k.1, *r))
+            .unzip();
+        let lo = stations.iter().map(|r| r.0).fold(f64::INFINITY, f64::min) - margin;
+        let hi = stations
+            .iter()
+            .map(|r| r.1)
             .fold(f64::NEG_INFINITY, f64::max)
             + margin;
         LensFamily::build(design, array, &lenses, (lo, hi), fit)

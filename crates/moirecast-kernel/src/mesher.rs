@@ -553,8 +553,7 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
         .map(|(r, &v)| {
             let boundary = (r == 0 || r == last_row).then_some(if r == 0 { -hh } else { hh });
             let mut out = Vec::with_capacity(row_len);
-            for i in 0..n {
-                let cols = rev_columns[i];
+            for (i, &cols) in rev_columns.iter().enumerate().take(n) {
                 let arc = d.revealer_arc(i as i64, v);
                 let first = if i == 0 { 0 } else { 1 };
                 for j in first..=cols {
@@ -724,11 +723,11 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
         .into_par_iter()
         .map(|r| {
             let (mut t, mut p) = (Vec::new(), Vec::new());
-            for i in 0..n {
-                let a: Vec<u32> = (0..=rev_columns[i])
+            for (i, &cols) in rev_columns.iter().enumerate().take(n) {
+                let a: Vec<u32> = (0..=cols)
                     .map(|j| dm_ref.revealer_vertex(r, i, j))
                     .collect();
-                let b: Vec<u32> = (0..=rev_columns[i])
+                let b: Vec<u32> = (0..=cols)
                     .map(|j| dm_ref.revealer_vertex(r + 1, i, j))
                     .collect();
                 let lens = LensRef::Revealer(i as i64);
