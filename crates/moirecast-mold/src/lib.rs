@@ -122,11 +122,6 @@ fn sliver_free(
         .flat_map_iter(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
         .map(|(a, b)| m.positions[a as usize].distance(m.positions[b as usize]))
         .reduce(|| f64::INFINITY, f64::min);
-    const SLIVER_CHECKS: [&str; 3] = [
-        "no-degenerate-triangles",
-        "f32-safe-triangles",
-        "f32-distinct-vertices",
-    ];
     let slivers = checks
         .iter()
         .any(|c| !c.passed && SLIVER_CHECKS.contains(&c.name));
@@ -172,6 +167,14 @@ fn frustum_rings(centre: DVec2, frustum: &Manifold) -> parting::Bump {
         top: ring(z1),
     }
 }
+
+/// The solid checks that fail on slivers: a half failing one of them has
+/// its slivers collapsed (see [`sliver_free`]).
+const SLIVER_CHECKS: [&str; 3] = [
+    "no-degenerate-triangles",
+    "f32-safe-triangles",
+    "f32-distinct-vertices",
+];
 
 /// Distance from `q` to the triangle `corners`.
 fn distance_to(q: DVec3, [a, b, c]: [DVec3; 3]) -> f64 {
@@ -664,4 +667,24 @@ pub fn build_mold(
             },
         ],
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `sliver_free` picks its checks by name: every name must be one the
+    /// kernel's solid checks report, or a renamed check would silently stop
+    /// slivers from being collapsed.
+    #[test]
+    fn sliver_checks_are_solid_checks() {
+        let cube = to_mesh(&cuboid(DVec3::ZERO, DVec3::ONE).unwrap()).mesh;
+        let names: Vec<&str> = solid_checks_for(&cube, SolidSpec::boolean_result(0))
+            .iter()
+            .map(|c| c.name)
+            .collect();
+        for name in SLIVER_CHECKS {
+            assert!(names.contains(&name), "{name} is not among {names:?}");
+        }
+    }
 }
