@@ -30,7 +30,10 @@ impl Tolerance {
 pub const SOLVE_RESIDUAL_MM: f64 = 1e-11;
 
 /// Distance (mm) under which a base crease counts as lying on a side wall
-/// (it may touch the wall tangentially). Twice [`crate::check::MIN_ALTITUDE_MM`],
-/// so a crease just outside the snap leaves no triangle thinner than that;
-/// far below any tolerance.
-pub const WALL_SNAP_MM: f64 = 2e-5;
+/// (it may touch the wall tangentially). Four times
+/// [`crate::check::MIN_ALTITUDE_MM`]: a crease just outside the snap leaves
+/// wall triangles that thin, and the mold, splitting the wall's rungs at
+/// mid-height, halves that; twice the smallest altitude still leaves room
+/// for the triangles the mold fans to those points at an angle. Far below
+/// any tolerance.
+pub const WALL_SNAP_MM: f64 = 4e-5;

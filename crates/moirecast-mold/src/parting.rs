@@ -575,6 +575,34 @@ impl SolidBuilder {
     }
 }
 
+/// Closest spacing (mm) of the points along a region's top edge. The
+/// floor's border may hold points a few 1e-5 mm apart (a crease just
+/// outside the wall snap, its rung then split at mid-wall), and the cap's
+/// fan from the footprint's centre meets such a pair at a shallow angle: a
+/// sliver. Each side instead zips the whole border to a top edge thinned to
+/// this spacing; its triangles stand nearly upright, the cap being at least
+/// a wall's thickness (1 mm) above the border.
+const TOP_EDGE_SPACING_MM: f64 = 0.1;
+
+/// The points of `border` (increasing `along`, ends at the footprint's
+/// corners) kept on the top edge at `top_z`: both ends, and between them
+/// each point [`TOP_EDGE_SPACING_MM`] past the last one kept and short of
+/// the far end by as much.
+fn top_edge(border: &[DVec3], along: impl Fn(DVec3) -> f64, top_z: f64) -> Vec<DVec3> {
+    let (first, last) = (border[0], border[border.len() - 1]);
+    let mut kept = vec![first];
+    for &p in &border[1..border.len() - 1] {
+        let since = along(p) - along(kept[kept.len() - 1]);
+        if since >= TOP_EDGE_SPACING_MM && along(last) - along(p) >= TOP_EDGE_SPACING_MM {
+            kept.push(p);
+        }
+    }
+    kept.push(last);
+    kept.into_iter()
+        .map(|p| DVec3::new(p.x, p.y, top_z))
+        .collect()
+}
+
 /// Zips two polylines that run side by side (a strip between two parallel
 /// segments) into triangles, advancing whichever is behind.
 fn zip_strip(
@@ -887,11 +915,12 @@ pub fn parting_region(
     let mut top_ring: Vec<DVec3> = Vec::new();
     for w in Wall::ALL {
         let pts = border(w);
+        let top = top_edge(&pts, |p| w.along(p), top_z);
         // Counter-clockwise seen from above: y-min and x-max forward,
         // y-max and x-min backward.
         let ring_part: Vec<DVec3> = match w {
-            Wall::YMin | Wall::XMax => pts.clone(),
-            Wall::YMax | Wall::XMin => pts.iter().rev().copied().collect(),
+            Wall::YMin | Wall::XMax => top.clone(),
+            Wall::YMax | Wall::XMin => top.iter().rev().copied().collect(),
         };
         for q in ring_part {
             let q = DVec3::new(q.x, q.y, top_z);
@@ -899,12 +928,7 @@ pub fn parting_region(
                 top_ring.push(q);
             }
         }
-        let out = w.outward().extend(0.0);
-        for k in 0..pts.len() - 1 {
-            let (p, q) = (pts[k], pts[k + 1]);
-            let (pt, qt) = (DVec3::new(p.x, p.y, top_z), DVec3::new(q.x, q.y, top_z));
-            b.quad(p, q, qt, pt, out);
-        }
+        zip_strip(&mut b, &pts, &top, |p| w.along(p), w.outward().extend(0.0));
     }
     if top_ring.first() == top_ring.last() {
         top_ring.pop();
@@ -923,6 +947,26 @@ pub fn parting_region(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Points crowding a corner (a crease just outside the wall snap, its
+    /// rung split at mid-wall) never reach the top edge closer than the
+    /// spacing, which keeps both corners.
+    #[test]
+    fn the_top_edge_keeps_its_corners_and_its_spacing() {
+        let xs = [
+            -9.0, -5.0, -4.99998, -4.9999, -4.89, -4.0, 4.95, 4.99998, 5.0, 9.0,
+        ];
+        let border: Vec<DVec3> = xs.iter().map(|&x| DVec3::new(x, 2.0, 0.1 * x)).collect();
+        let top = top_edge(&border, |p| p.x, 7.0);
+        assert_eq!(top.first().unwrap().x, -9.0);
+        assert_eq!(top.last().unwrap().x, 9.0);
+        assert!(top.iter().all(|p| p.z == 7.0 && p.y == 2.0));
+        for pair in top.windows(2) {
+            assert!(pair[1].x - pair[0].x >= TOP_EDGE_SPACING_MM, "{pair:?}");
+        }
+        let kept: Vec<f64> = top.iter().map(|p| p.x).collect();
+        assert_eq!(kept, [-9.0, -5.0, -4.89, -4.0, 4.95, 9.0]);
+    }
 
     /// A key bump on a corner square, closed below by a 1 mm box: a closed
     /// solid of genus 0 whose volume is the box's plus the frustum's part
