@@ -13,7 +13,7 @@ use proptest::prelude::*;
 use truck_modeling::ShellCondition;
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+    #![proptest_config(moirecast_kernel::strategies::config(48))]
 
     #[test]
     fn random_designs_give_closed_breps_that_round_trip(design in design_strategy()) {
@@ -77,7 +77,7 @@ fn assert_printed_brep(
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+    #![proptest_config(moirecast_kernel::strategies::config(24))]
 
     /// Random printed designs (every surface and profile kind, any duty and
     /// layer thickness): both bodies' B-reps close, with the meshes' genus

@@ -117,3 +117,20 @@ prop_compose! {
         Design::new(p).ok()
     }
 }
+
+/// A property test's configuration: `cases` random designs, times
+/// `MOIRECAST_SOAK` when it is set. CI runs the counts as written (its
+/// seeds are random, so every run explores anew); a soak before a change to
+/// the geometry runs many more, e.g. `MOIRECAST_SOAK=30 cargo test -p
+/// moirecast-mold`.
+pub fn config(cases: u32) -> ProptestConfig {
+    let soak = std::env::var("MOIRECAST_SOAK")
+        .ok()
+        .and_then(|v| v.parse::<u32>().ok())
+        .unwrap_or(1)
+        .max(1);
+    ProptestConfig {
+        cases: cases * soak,
+        ..ProptestConfig::default()
+    }
+}

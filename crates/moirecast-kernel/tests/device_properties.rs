@@ -192,7 +192,7 @@ fn the_self_intersection_checks_catch_folds_and_crossings() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+    #![proptest_config(moirecast_kernel::strategies::config(48))]
 
     /// Closed and oriented, vertices on their exact surfaces, exact surfaces
     /// within tolerance of the mesh, AFOV measured equal to α, creases shared.
@@ -262,7 +262,7 @@ prop_compose! {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    #![proptest_config(moirecast_kernel::strategies::config(64))]
 
     /// Validation has no gaps: whatever it accepts meshes into a solid.
     #[test]

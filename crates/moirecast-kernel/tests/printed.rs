@@ -123,7 +123,7 @@ fn band_edges_that_touch_a_wall_are_repaired_within_tolerance() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+    #![proptest_config(moirecast_kernel::strategies::config(32))]
 
     /// Random printed designs: every surface and profile kind, any duty
     /// cycle and layer thickness; both bodies solid, of the expected genus

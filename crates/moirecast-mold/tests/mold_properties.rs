@@ -12,7 +12,7 @@ use moirecast_mold::{build_mold, MoldError, MoldParams};
 use proptest::prelude::*;
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+    #![proptest_config(moirecast_kernel::strategies::config(32))]
 
     #[test]
     fn random_designs_get_a_correct_mold_or_a_clear_refusal(
