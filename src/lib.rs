@@ -95,6 +95,7 @@ pub fn build_device_checked(
     checks.push(measure::vertex_on_surface(design, &mesh, v_stride));
     checks.push(measure::surface_to_mesh(design, &mesh, t_stride));
     checks.push(measure::walls_on_outline(design, &mesh));
+    checks.push(measure::walls_face_out(&mesh));
     checks.push(measure::creases_shared(design, &mesh));
     checks.push(measure::base_creases_follow_shift(design, &mesh));
     checks.push(measure::surfaces_are_graphs(&mesh));

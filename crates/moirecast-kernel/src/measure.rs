@@ -372,6 +372,43 @@ pub fn walls_on_outline(design: &Design, dm: &DeviceMesh) -> CheckResult {
     )
 }
 
+/// Every wall triangle faces out of the device through its wall: none is
+/// folded over its neighbours, which would leave the wall overlapping
+/// itself in its plane (closed and oriented, yet not a simple surface; the
+/// mold's cavity would lose the overlapped area).
+pub fn walls_face_out(dm: &DeviceMesh) -> CheckResult {
+    let mut folded = 0usize;
+    let mut worst = (f64::INFINITY, DVec3::ZERO, Side::Left);
+    for (t, patch) in dm.mesh.triangles.iter().zip(&dm.patches) {
+        let Patch::Wall(side) = patch else { continue };
+        let outward = match side {
+            Side::Left => DVec3::NEG_X,
+            Side::Right => DVec3::X,
+            Side::Front => DVec3::NEG_Y,
+            Side::Back => DVec3::Y,
+        };
+        let [a, b, c] = t.map(|v| dm.mesh.positions[v as usize]);
+        let facing = (b - a).cross(c - a).dot(outward);
+        if facing <= 0.0 {
+            folded += 1;
+        }
+        if facing < worst.0 {
+            worst = (facing, (a + b + c) / 3.0, *side);
+        }
+    }
+    let (facing, p, side) = worst;
+    CheckResult::at_most(
+        "walls-face-out",
+        folded as f64,
+        0.0,
+        "triangles",
+        format!(
+            "wall triangles whose normal points into the device; least outward (twice the area {facing:.3e} mm²) on the {side:?} wall near ({:.3}, {:.3}, {:.3})",
+            p.x, p.y, p.z
+        ),
+    )
+}
+
 /// Neighbouring revealer lenses share their creases: the arc formula of
 /// lens i at its right end and of lens i+1 at its left end meet (checked at
 /// every station row), and the mesh uses one vertex for both.

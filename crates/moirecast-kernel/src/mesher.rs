@@ -207,32 +207,54 @@ fn rows_from_curvature(lo: f64, hi: f64, k: &[f64], e: f64, min_segments: usize)
 /// Triangulates the strip between polylines `a` and `b` (both ordered by
 /// `key`), advancing along whichever has the nearer next vertex. Triangles
 /// are (a_i, a_{i+1}, b_j) and (a_i, b_{j+1}, b_j), reversed if `flip`.
+///
+/// A wall passes `facing`: the positions and its outward normal. Where one
+/// edge is sparse (three vertices along a straight revealer edge) and the
+/// other wavy, the nearer-vertex rule can fan a sparse vertex over a steep
+/// stretch of the wavy edge that faces away from it: triangles folded over
+/// their neighbours, the wall overlapping itself in its plane. There the
+/// other advance is taken when its triangle faces out.
 fn zip(
     a: &[u32],
     b: &[u32],
     key: &dyn Fn(u32) -> f64,
     flip: bool,
     patch: Patch,
-    out: &mut Vec<[u32; 3]>,
-    patches: &mut Vec<Patch>,
+    facing: Option<(&[DVec3], DVec3)>,
+    (out, patches): (&mut Vec<[u32; 3]>, &mut Vec<Patch>),
 ) {
+    let oriented = |t: [u32; 3]| if flip { [t[0], t[2], t[1]] } else { t };
+    let faces_out = |t: [u32; 3]| {
+        facing.is_none_or(|(pos, outward)| {
+            let [p, q, r] = oriented(t).map(|v| pos[v as usize]);
+            (q - p).cross(r - p).dot(outward) > 0.0
+        })
+    };
     let (mut i, mut j) = (0, 0);
     while i + 1 < a.len() || j + 1 < b.len() {
+        let along_a = [a[i], a[(i + 1).min(a.len() - 1)], b[j]];
+        let along_b = [a[i], b[(j + 1).min(b.len() - 1)], b[j]];
         let advance_a = if i + 1 == a.len() {
             false
         } else if j + 1 == b.len() {
             true
         } else {
-            key(a[i + 1]) <= key(b[j + 1])
+            let nearer = key(a[i + 1]) <= key(b[j + 1]);
+            let (preferred, other) = if nearer {
+                (along_a, along_b)
+            } else {
+                (along_b, along_a)
+            };
+            nearer != (!faces_out(preferred) && faces_out(other))
         };
         let tri = if advance_a {
             i += 1;
-            [a[i - 1], a[i], b[j]]
+            along_a
         } else {
             j += 1;
-            [a[i], b[j], b[j - 1]]
+            along_b
         };
-        out.push(if flip { [tri[0], tri[2], tri[1]] } else { tri });
+        out.push(oriented(tri));
         patches.push(patch);
     }
 }
@@ -737,8 +759,8 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
                     &|v| key_t(&dm_ref.origins[v as usize], lens),
                     false,
                     Patch::Lens(lens),
-                    &mut t,
-                    &mut p,
+                    None,
+                    (&mut t, &mut p),
                 );
             }
             (t, p)
@@ -769,7 +791,7 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
                 let a: Vec<u32> = a.iter().map(|i| i + oa).collect();
                 let b: Vec<u32> = b.iter().map(|i| i + ob).collect();
                 let lens = LensRef::Base(k);
-                zip(&a, &b, &|v| key_t(&dm_ref.origins[v as usize], lens), true, Patch::Lens(lens), &mut t, &mut p);
+                zip(&a, &b, &|v| key_t(&dm_ref.origins[v as usize], lens), true, Patch::Lens(lens), None, (&mut t, &mut p));
             }
             Ok((t, p))
         })
@@ -815,8 +837,8 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
         &key_y,
         true,
         Patch::Wall(Side::Left),
-        &mut tris,
-        &mut patches,
+        Some((pos, DVec3::NEG_X)),
+        (&mut tris, &mut patches),
     );
     zip(
         &right_bottom,
@@ -824,8 +846,8 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
         &key_y,
         false,
         Patch::Wall(Side::Right),
-        &mut tris,
-        &mut patches,
+        Some((pos, DVec3::X)),
+        (&mut tris, &mut patches),
     );
     zip(
         &front_bottom,
@@ -833,8 +855,8 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
         &key_x,
         false,
         Patch::Wall(Side::Front),
-        &mut tris,
-        &mut patches,
+        Some((pos, DVec3::NEG_Y)),
+        (&mut tris, &mut patches),
     );
     zip(
         &back_bottom,
@@ -842,8 +864,8 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
         &key_x,
         true,
         Patch::Wall(Side::Back),
-        &mut tris,
-        &mut patches,
+        Some((pos, DVec3::Y)),
+        (&mut tris, &mut patches),
     );
     let wall_triangles = tris.len() - revealer_triangles - base_triangles;
     progress.tick(1);

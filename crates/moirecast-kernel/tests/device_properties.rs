@@ -25,6 +25,7 @@ fn assert_device_invariants(d: &Design, dm: &DeviceMesh) {
         measure::vertex_on_surface(d, dm, 1),
         measure::surface_to_mesh(d, dm, 1),
         measure::walls_on_outline(d, dm),
+        measure::walls_face_out(dm),
         measure::creases_shared(d, dm),
         measure::base_creases_follow_shift(d, dm),
         measure::surfaces_are_graphs(dm),
@@ -189,6 +190,44 @@ fn the_self_intersection_checks_catch_folds_and_crossings() {
     crossed.mesh.positions[v].z += 10.0;
     let c = measure::min_thickness(&d, &crossed, 1);
     assert!(!c.passed && c.value < 0.0, "{c:?}");
+}
+
+/// A regression (a mold soak, 2026-12-02): a cylinder design whose revealer
+/// meets the x-walls in straight edges of three vertices, over base edges
+/// rippled by the base lenses. The nearer-vertex zip fanned a revealer
+/// vertex over steep base stretches facing away from it: a dozen wall
+/// triangles folded over their neighbours (closed and oriented, but the
+/// wall overlapping itself), and the mold's cavity missed 0.02 mm² of wall.
+#[test]
+fn a_sparse_wall_edge_over_a_rippled_one_does_not_fold() {
+    let period = 0.7877315816643223;
+    let mut p = DesignParams::with_defaults(
+        PitchSurface::Cylinder { radius: -20.0 },
+        12.0 * period,
+        11.66778682736896,
+        period,
+    );
+    p.lens.afov = 1.2213867359963457;
+    p.lens.index = 1.35;
+    p.base.levels = 1.2578794498018877;
+    p.profile = Profile::Rings {
+        wavelength: 3.9956149646447168,
+    };
+    p.tolerance = 0.0024829639221954003;
+    let d = Design::new(p).unwrap();
+    let dm = mesh_device(&d, &Silent).unwrap();
+    assert_device_invariants(&d, &dm);
+    let c = measure::walls_face_out(&dm);
+    assert!(c.passed && c.value == 0.0, "{c:?}");
+    // a wall triangle folded by hand is counted
+    let mut folded = dm.clone();
+    let t = folded
+        .patches
+        .iter()
+        .position(|p| matches!(p, mesher::Patch::Wall(_)))
+        .unwrap();
+    folded.mesh.triangles[t].swap(1, 2);
+    assert_eq!(measure::walls_face_out(&folded).value, 1.0);
 }
 
 proptest! {
