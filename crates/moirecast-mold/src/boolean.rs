@@ -179,27 +179,47 @@ pub fn cuboid(lo: DVec3, hi: DVec3) -> Result<Manifold> {
 /// booleans would leave vertices nanometres apart there.
 const HALF_FACET_DEG: f64 = 180.0 / CIRCLE_SEGMENTS as f64;
 
-/// A vertical frustum over `axis` from `z0` (radius `r0`) to `z1` (radius `r1`).
-pub fn vertical_frustum(axis: DVec2, z0: f64, z1: f64, r0: f64, r1: f64) -> Result<Manifold> {
+/// A further turn (degrees) of the channels' polygons: a quarter facet,
+/// still clear of the axes. The mold takes it when a channel's edge happens
+/// to cross a wall within nanometres of a device vertex, a sliver manifold
+/// will not collapse.
+pub const QUARTER_FACET_DEG: f64 = HALF_FACET_DEG / 2.0;
+
+/// A vertical frustum over `axis` from `z0` (radius `r0`) to `z1` (radius
+/// `r1`), its polygon turned `twist` degrees past the half facet.
+pub fn vertical_frustum(
+    axis: DVec2,
+    z0: f64,
+    z1: f64,
+    (r0, r1): (f64, f64),
+    twist: f64,
+) -> Result<Manifold> {
     checked(
         "vertical channel",
         snapped(
             Manifold::cylinder(z1 - z0, r0, r1, CIRCLE_SEGMENTS)
-                .rotate(0.0, 0.0, HALF_FACET_DEG)
+                .rotate(0.0, 0.0, HALF_FACET_DEG + twist)
                 .translate(v3(axis.extend(z0))),
         ),
     )
 }
 
 /// A horizontal cylinder of radius `r` from `from` along the unit xy
-/// direction `dir` for `length`.
-pub fn horizontal_cylinder(from: DVec3, dir: DVec2, length: f64, r: f64) -> Result<Manifold> {
+/// direction `dir` for `length`, its polygon turned `twist` degrees past
+/// the half facet.
+pub fn horizontal_cylinder(
+    from: DVec3,
+    dir: DVec2,
+    length: f64,
+    r: f64,
+    twist: f64,
+) -> Result<Manifold> {
     let angle = dir.y.atan2(dir.x).to_degrees();
     checked(
         "runner",
         snapped(
             Manifold::cylinder(length, r, r, CIRCLE_SEGMENTS)
-                .rotate(0.0, 0.0, HALF_FACET_DEG)
+                .rotate(0.0, 0.0, HALF_FACET_DEG + twist)
                 .rotate(0.0, 90.0, 0.0)
                 .rotate(0.0, 0.0, angle)
                 .translate(v3(from)),

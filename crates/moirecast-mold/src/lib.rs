@@ -281,15 +281,15 @@ pub fn build_mold(
             xy,
             z - 0.5 * h,
             z + h,
-            r_low,
-            r_low - 1.5 * h * tan,
+            (r_low, r_low - 1.5 * h * tan),
+            0.0,
         )?);
         sockets.push(vertical_frustum(
             xy,
             z - 0.5 * h,
             z + h + c,
-            r_low + c,
-            r_low + c - (1.5 * h + c) * tan,
+            (r_low + c, r_low + c - (1.5 * h + c) * tan),
+            0.0,
         )?);
     }
     let bump_rings: Vec<parting::Bump> = f
@@ -355,77 +355,117 @@ pub fn build_mold(
     let above = to_manifold("block above the parting surface", &above_mesh)?;
     let block = cuboid(f.block_lo, f.block_hi)?;
     let past_top = f.block_hi.z + PAST_BLOCK_MM;
-    let g = &f.gate;
-    let (from, dir, length) = features::runner_span(g);
-    let mut fill = vec![
-        horizontal_cylinder(from, dir, length, g.radius)?,
-        vertical_frustum(
-            g.sprue_axis,
-            g.sprue_bottom_z,
-            past_top,
-            g.sprue_radius,
-            g.sprue_radius,
-        )?,
-        {
-            let floor = f.block_hi.z - g.cone_depth;
-            let r_top = g.sprue_radius
-                + (g.cone_radius - g.sprue_radius) * (past_top - floor) / g.cone_depth.max(1e-9);
-            if g.cone_depth > 0.0 {
-                vertical_frustum(g.sprue_axis, floor, past_top, g.sprue_radius, r_top)?
-            } else {
-                Manifold::empty()
-            }
-        },
-    ];
-    for v in &f.vents {
-        fill.push(vertical_frustum(
-            v.axis, v.foot_z, past_top, v.radius, v.radius,
-        )?);
-    }
-    let fill = union_all("runner, sprue and vents", fill)?;
-    let bolts = union_all(
-        "bolt holes",
-        f.bolts
-            .iter()
-            .map(|&b| {
-                vertical_frustum(
-                    b,
-                    f.block_lo.z - PAST_BLOCK_MM,
-                    past_top,
-                    p.bolt_diameter / 2.0,
-                    p.bolt_diameter / 2.0,
-                )
-            })
-            .collect::<Result<_>>()?,
-    )?;
     let bumps = union_all("key bumps", bump_solids)?;
     let sockets = union_all("key sockets", sockets)?;
-    let channels = checked("channels", fill.union(&bolts))?;
-    let top_cut = checked("channels and sockets", channels.union(&sockets))?;
-    // Three chains of about equal work on two cores: the top half, the
-    // device's import (for the volumes below), and the bottom half.
+    // The channels (runner, sprue, cone and vents; bolt holes), their
+    // polygons turned `twist` degrees past the half facet: (fill, all
+    // channels, all channels and the key sockets).
+    let channels_turned = |twist: f64| -> Result<(Manifold, Manifold, Manifold)> {
+        let g = &f.gate;
+        let (from, dir, length) = features::runner_span(g);
+        let mut fill = vec![
+            horizontal_cylinder(from, dir, length, g.radius, twist)?,
+            vertical_frustum(
+                g.sprue_axis,
+                g.sprue_bottom_z,
+                past_top,
+                (g.sprue_radius, g.sprue_radius),
+                twist,
+            )?,
+            {
+                let floor = f.block_hi.z - g.cone_depth;
+                let r_top = g.sprue_radius
+                    + (g.cone_radius - g.sprue_radius) * (past_top - floor)
+                        / g.cone_depth.max(1e-9);
+                if g.cone_depth > 0.0 {
+                    vertical_frustum(
+                        g.sprue_axis,
+                        floor,
+                        past_top,
+                        (g.sprue_radius, r_top),
+                        twist,
+                    )?
+                } else {
+                    Manifold::empty()
+                }
+            },
+        ];
+        for v in &f.vents {
+            fill.push(vertical_frustum(
+                v.axis,
+                v.foot_z,
+                past_top,
+                (v.radius, v.radius),
+                twist,
+            )?);
+        }
+        let fill = union_all("runner, sprue and vents", fill)?;
+        let bolt_r = p.bolt_diameter / 2.0;
+        let bolts = union_all(
+            "bolt holes",
+            f.bolts
+                .iter()
+                .map(|&b| {
+                    vertical_frustum(
+                        b,
+                        f.block_lo.z - PAST_BLOCK_MM,
+                        past_top,
+                        (bolt_r, bolt_r),
+                        twist,
+                    )
+                })
+                .collect::<Result<_>>()?,
+        )?;
+        let channels = checked("channels", fill.union(&bolts))?;
+        let top_cut = checked("channels and sockets", channels.union(&sockets))?;
+        Ok((fill, channels, top_cut))
+    };
+    let (mut fill, mut channels, mut top_cut) = channels_turned(0.0)?;
     let genus_top = 1 + f.vents.len() as u32 + f.bolts.len() as u32;
     let genus_bottom = f.bolts.len() as u32;
     let device_id = Manifold::reserve_ids(1);
     let import = |what: &str, r: &Region| {
         boolean::to_region_manifold(what, &r.mesh, &r.device_faces, device_id)
     };
+    let top_half = |top_cut: &Manifold| {
+        let top = import("top half before its channels", &top_region)?;
+        sliver_free("top half", top.difference(top_cut), genus_top)
+    };
+    let bottom_half = |channels: &Manifold| {
+        let bottom = import("bottom half before its channels", &bottom_region)?;
+        sliver_free("bottom half", bottom.difference(channels), genus_bottom)
+    };
+    // Three chains of about equal work on two cores: the top half, the
+    // device's import (for the volumes below), and the bottom half.
     let ((top_t, dev), bottom_t) = rayon::join(
         || {
             rayon::join(
-                || {
-                    let top = import("top half before its channels", &top_region)?;
-                    sliver_free("top half", top.difference(&top_cut), genus_top)
-                },
+                || top_half(&top_cut),
                 || boolean::to_traced_manifold("device", &posed.mesh, device_id),
             )
         },
-        || {
-            let bottom = import("bottom half before its channels", &bottom_region)?;
-            sliver_free("bottom half", bottom.difference(&channels), genus_bottom)
-        },
+        || bottom_half(&channels),
     );
-    let ((top_t, top_checks), (bottom_t, bottom_checks), dev) = (top_t?, bottom_t?, dev?);
+    let (mut top_h, mut bottom_h, dev) = (top_t?, bottom_t?, dev?);
+    // Rarely a channel's edge crosses a wall within nanometres of a device
+    // vertex, and manifold will not collapse the sliver between them: then
+    // the channels are built again turned a quarter facet.
+    let slivered = |checks: &[CheckResult]| {
+        checks
+            .iter()
+            .any(|c| !c.passed && SLIVER_CHECKS.contains(&c.name))
+    };
+    let mut turned_note = None;
+    if slivered(&top_h.1) || slivered(&bottom_h.1) {
+        (fill, channels, top_cut) = channels_turned(boolean::QUARTER_FACET_DEG)?;
+        let (t, b) = rayon::join(|| top_half(&top_cut), || bottom_half(&channels));
+        (top_h, bottom_h) = (t?, b?);
+        turned_note = Some(format!(
+            "the channels' polygons are turned {:.3}° more than usual: at the usual turn a channel crossed a wall within nanometres of a device vertex",
+            boolean::QUARTER_FACET_DEG
+        ));
+    }
+    let ((top_t, top_checks), (bottom_t, bottom_checks)) = (top_h, bottom_h);
     progress.tick(1);
 
     progress.stage("mold solid checks", 1);
@@ -632,7 +672,11 @@ pub fn build_mold(
             device: v_device,
             voids: v_voids,
         },
-        features: f.clone(),
+        features: {
+            let mut features = f.clone();
+            features.warnings.extend(turned_note);
+            features
+        },
         draft_top,
         draft_bottom,
         genus_top,
