@@ -122,10 +122,7 @@ fn sliver_free(
         .flat_map_iter(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
         .map(|(a, b)| m.positions[a as usize].distance(m.positions[b as usize]))
         .reduce(|| f64::INFINITY, f64::min);
-    let slivers = checks
-        .iter()
-        .any(|c| !c.passed && SLIVER_CHECKS.contains(&c.name));
-    if shortest >= SLIVER_MM && !slivers {
+    if shortest >= SLIVER_MM && !has_slivers(&checks) {
         return Ok((mesh, checks));
     }
     let half = checked(
@@ -175,6 +172,13 @@ const SLIVER_CHECKS: [&str; 3] = [
     "f32-safe-triangles",
     "f32-distinct-vertices",
 ];
+
+/// Whether any of the [`SLIVER_CHECKS`] failed.
+fn has_slivers(checks: &[CheckResult]) -> bool {
+    checks
+        .iter()
+        .any(|c| !c.passed && SLIVER_CHECKS.contains(&c.name))
+}
 
 /// Distance from `q` to the triangle `corners`.
 fn distance_to(q: DVec3, [a, b, c]: [DVec3; 3]) -> f64 {
@@ -450,13 +454,8 @@ pub fn build_mold(
     // Rarely a channel's edge crosses a wall within nanometres of a device
     // vertex, and manifold will not collapse the sliver between them: then
     // the channels are built again turned a quarter facet.
-    let slivered = |checks: &[CheckResult]| {
-        checks
-            .iter()
-            .any(|c| !c.passed && SLIVER_CHECKS.contains(&c.name))
-    };
     let mut turned_note = None;
-    if slivered(&top_h.1) || slivered(&bottom_h.1) {
+    if has_slivers(&top_h.1) || has_slivers(&bottom_h.1) {
         (fill, channels, top_cut) = channels_turned(boolean::QUARTER_FACET_DEG)?;
         let (t, b) = rayon::join(|| top_half(&top_cut), || bottom_half(&channels));
         (top_h, bottom_h) = (t?, b?);

@@ -923,7 +923,6 @@ pub fn parting_region(
             Wall::YMax | Wall::XMin => top.iter().rev().copied().collect(),
         };
         for q in ring_part {
-            let q = DVec3::new(q.x, q.y, top_z);
             if top_ring.last() != Some(&q) {
                 top_ring.push(q);
             }
