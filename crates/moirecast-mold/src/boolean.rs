@@ -24,42 +24,37 @@ pub fn checked(operation: impl Into<String>, m: Manifold) -> Result<Manifold> {
     }
 }
 
-/// Imports a closed mesh under original ID `id`; every triangle carries its
-/// own index as face ID through the booleans, so faces of the results can be
-/// traced back to it.
-pub fn to_traced_manifold(what: &str, mesh: &Mesh, id: u32) -> Result<Manifold> {
-    let n = mesh.triangles.len() as u64;
-    let runs = Runs {
-        face_id: (0..n).collect(),
-        run_index: vec![0, 3 * n],
-        run_original_id: vec![id],
-    };
-    import(what, mesh, Some(runs))
-}
-
 /// Imports a region whose first `device_faces.len()` triangles are faces of
-/// the device (traced under `device_id` with those face IDs); the rest
-/// carry a fresh original ID.
+/// the device (traced under `device_id` with those face IDs) and whose last
+/// `interface` triangles are traced under `interface_id`; the rest carry a
+/// fresh original ID.
 pub fn to_region_manifold(
     what: &str,
     mesh: &Mesh,
     device_faces: &[u32],
     device_id: u32,
+    (interface, interface_id): (usize, u32),
 ) -> Result<Manifold> {
     let own_id = Manifold::reserve_ids(1);
-    let k = device_faces.len();
+    let (k, n) = (device_faces.len(), mesh.triangles.len());
     let face_id = device_faces
         .iter()
         .map(|&f| u64::from(f))
-        .chain(k as u64..mesh.triangles.len() as u64)
+        .chain(k as u64..n as u64)
         .collect();
+    let mut run_index = vec![0, 3 * k as u64, 3 * (n - interface) as u64];
+    let mut run_original_id = vec![device_id, own_id];
+    if interface > 0 {
+        run_index.push(3 * n as u64);
+        run_original_id.push(interface_id);
+    }
     import(
         what,
         mesh,
         Some(Runs {
             face_id,
-            run_index: vec![0, 3 * k as u64, 3 * mesh.triangles.len() as u64],
-            run_original_id: vec![device_id, own_id],
+            run_index,
+            run_original_id,
         }),
     )
 }
