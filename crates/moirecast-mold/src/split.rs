@@ -2,17 +2,18 @@
 //! triangle of an operand, and a half's channels come near only a few of the
 //! device's faces. The device faces no channel comes near (the far patch)
 //! therefore stay out of the boolean: the rest of the region is closed by an
-//! interface (vertical curtains over the patch's boundary and a flat lid
-//! over them), manifold cuts the channels into that, and the patch takes the
+//! interface (vertical curtains over the patch's rims and a flat lid over
+//! them), manifold cuts the channels into that, and the patch takes the
 //! interface's place again. The patch and the interface bound a solid the
 //! channels miss, so the result is the region minus the channels, face for
 //! face.
 //!
 //! Every assumption is checked, and where one fails the caller cuts the
-//! whole region instead: the patch must be one disc (one boundary loop, no
-//! vertex on it twice) of faces seen from the half's side only, the lid
-//! must clear the patch and the region's cap, every new triangle must be
-//! well shaped, and the cut must come back with the interface whole.
+//! whole region instead: the patch must be one piece (one outer rim, holes
+//! where channels come down inside it, no vertex on two rims or on one
+//! twice) of faces seen from the half's side only, the lid must clear the
+//! patch and the region's cap and cover the rims once, every new triangle
+//! must be well shaped, and the cut must come back with the interface whole.
 
 use crate::boolean::{f32_exact, Traced};
 use crate::parting::{Face, PosedDevice, Rect, Region};
@@ -20,7 +21,7 @@ use glam::{DVec2, DVec3};
 use manifold_rust::linalg::Vec2;
 use moirecast_kernel::Mesh;
 use rayon::prelude::*;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 
 /// Clearance (mm) in xy between the far patch and the channels' bounding
 /// boxes, and between the patch and the outline (the walls).
@@ -104,10 +105,10 @@ pub fn split(
             by_near[v as usize] = true;
         }
     }
-    let rim_loop = boundary_loop(&region.mesh.triangles[..k], &is_far, |v| {
+    let rims = boundary_loops(&region.mesh.triangles[..k], &is_far, |v| {
         by_near[v as usize]
     })?;
-    let n = rim_loop.len();
+    let n: usize = rims.iter().map(Vec::len).sum();
     // The lid: clear of the patch by LID_RISE_MM, and of the cap.
     let extreme = (0..k)
         .into_par_iter()
@@ -143,55 +144,83 @@ pub fn split(
     near.triangles
         .extend_from_slice(&region.mesh.triangles[k..]);
     let first_interface = near.triangles.len();
-    // Curtains: over rim edge a→b of the patch, the near side holds a→b.
-    let lid0 = near.positions.len() as u32;
-    for &v in &rim_loop {
-        let p = pos[v as usize];
-        near.positions.push(DVec3::new(p.x, p.y, lid_z));
+    // Curtains: over rim edge a→b of the patch, the near side holds a→b;
+    // the lid then holds a'→b' (the lid vertex over a to that over b).
+    let mut lid_of = Vec::with_capacity(rims.len());
+    for rim in &rims {
+        let first = near.positions.len() as u32;
+        let m = rim.len() as u32;
+        for &v in rim {
+            let p = pos[v as usize];
+            near.positions.push(DVec3::new(p.x, p.y, lid_z));
+        }
+        for (j, &a) in rim.iter().enumerate() {
+            let j = j as u32;
+            let b = rim[((j + 1) % m) as usize];
+            let (a2, b2) = (first + j, first + (j + 1) % m);
+            near.triangles.push([a, b, b2]);
+            near.triangles.push([a, b2, a2]);
+        }
+        lid_of.push(first);
     }
-    for j in 0..n {
-        let (a, b) = (rim_loop[j], rim_loop[(j + 1) % n]);
-        let (a2, b2) = (lid0 + j as u32, lid0 + ((j + 1) % n) as u32);
-        near.triangles.push([a, b, b2]);
-        near.triangles.push([a, b2, a2]);
-    }
-    // The lid holds a'→b' for every rim edge a→b: wound as the loop runs.
-    let ring: Vec<Vec2> = rim_loop
+    // The lid: one polygon per rim, wound as the rims run (the outer one
+    // against the holes), handed to the ear clipper counter-clockwise.
+    let rings: Vec<Vec<Vec2>> = rims
         .iter()
-        .map(|&v| Vec2::new(pos[v as usize].x, pos[v as usize].y))
-        .collect();
-    let twice_area: f64 = (0..n)
-        .map(|j| {
-            let (p, q) = (ring[j], ring[(j + 1) % n]);
-            p.x * q.y - q.x * p.y
+        .map(|rim| {
+            rim.iter()
+                .map(|&v| Vec2::new(pos[v as usize].x, pos[v as usize].y))
+                .collect()
         })
-        .sum();
-    let ccw = twice_area > 0.0;
-    let polygon: Vec<Vec2> = if ccw {
-        ring.clone()
-    } else {
-        ring.iter().rev().copied().collect()
-    };
-    let lid = manifold_rust::polygon::triangulate(&vec![polygon], 1e-12, false);
-    if lid.len() + 2 != n {
+        .collect();
+    let twice_areas: Vec<f64> = rings.iter().map(|r| twice_signed_area(r)).collect();
+    let outer = (0..rings.len())
+        .max_by(|&i, &j| twice_areas[i].abs().total_cmp(&twice_areas[j].abs()))
+        .expect("a rim");
+    let twice_area: f64 = twice_areas.iter().sum();
+    let ccw = twice_areas[outer] > 0.0;
+    if (0..rings.len()).any(|i| i != outer && (twice_areas[i] > 0.0) == ccw) {
         return None;
     }
-    // Every triangle turns the rim's way and together they have the rim's
-    // area: the lid covers the rim once.
+    // The ear clipper's vertices, flattened, and the lid vertex each is.
+    let mut lid_vertex = Vec::with_capacity(n);
+    let polygons: Vec<Vec<Vec2>> = rings
+        .iter()
+        .zip(&lid_of)
+        .map(|(ring, &first)| {
+            let m = ring.len() as u32;
+            if ccw {
+                lid_vertex.extend(first..first + m);
+                ring.clone()
+            } else {
+                lid_vertex.extend((first..first + m).rev());
+                ring.iter().rev().copied().collect()
+            }
+        })
+        .collect();
+    let lid = manifold_rust::polygon::triangulate(&polygons, 1e-12, false);
+    if lid.len() + 2 != n + 2 * (rings.len() - 1) {
+        return None;
+    }
+    // Every triangle turns the rims' way and together they have the area
+    // between the rims: the lid covers it once.
+    let at = |v: u32| {
+        let p = near.positions[v as usize];
+        Vec2::new(p.x, p.y)
+    };
     let mut lid_twice_area = 0.0;
     for t in lid {
-        let mut idx = [t.x, t.y, t.z].map(|i| i as usize);
+        let mut tri = [t.x, t.y, t.z].map(|i| lid_vertex[i as usize]);
         if !ccw {
-            idx = idx.map(|i| n - 1 - i);
-            idx.swap(1, 2);
+            tri.swap(1, 2);
         }
-        let [a, b, c] = idx.map(|i| ring[i]);
+        let [a, b, c] = tri.map(at);
         let turn = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
         if turn * twice_area <= 0.0 {
             return None;
         }
         lid_twice_area += turn;
-        near.triangles.push(idx.map(|i| lid0 + i as u32));
+        near.triangles.push(tri);
     }
     if (lid_twice_area - twice_area).abs() > 1e-9 * twice_area.abs() {
         return None;
@@ -210,7 +239,7 @@ pub fn split(
         interface,
         far,
         far_device_faces,
-        rim: rim_loop,
+        rim: rims.concat(),
     })
 }
 
@@ -315,15 +344,26 @@ fn altitude([a, b, c]: [DVec3; 3]) -> f64 {
     twice_area / longest
 }
 
-/// The boundary of the triangles marked `inside`, as one loop of vertices
-/// in the triangles' winding; `None` unless it is exactly one loop that
-/// visits no vertex twice. Every boundary vertex must be `maybe_on_rim`
-/// (the others are passed over unseen).
-fn boundary_loop(
+/// Twice the signed area of a closed polygon (positive counter-clockwise).
+fn twice_signed_area(ring: &[Vec2]) -> f64 {
+    let n = ring.len();
+    (0..n)
+        .map(|j| {
+            let (p, q) = (ring[j], ring[(j + 1) % n]);
+            p.x * q.y - q.x * p.y
+        })
+        .sum()
+}
+
+/// The boundary of the triangles marked `inside`, as loops of vertices in
+/// the triangles' winding; `None` where a vertex is on it twice (two
+/// loops touch, or one pinches). Every boundary vertex must be
+/// `maybe_on_rim` (the others are passed over unseen).
+fn boundary_loops(
     triangles: &[[u32; 3]],
     inside: &[bool],
     maybe_on_rim: impl Fn(u32) -> bool + Sync,
-) -> Option<Vec<u32>> {
+) -> Option<Vec<Vec<u32>>> {
     // The marked triangles' directed edges that may be on the boundary,
     // keyed by their undirected pair: an edge seen once is on it.
     let mut edges: Vec<(u64, u32, u32)> = triangles
@@ -339,7 +379,7 @@ fn boundary_loop(
         })
         .collect();
     edges.par_sort_unstable_by_key(|e| e.0);
-    let mut next: HashMap<u32, u32> = HashMap::new();
+    let mut next: BTreeMap<u32, u32> = BTreeMap::new();
     let mut i = 0;
     while i < edges.len() {
         let mut j = i + 1;
@@ -357,17 +397,18 @@ fn boundary_loop(
         }
         i = j;
     }
-    let &start = next.keys().min()?;
-    let mut ring = vec![start];
-    let mut v = next[&start];
-    while v != start {
-        if ring.len() > next.len() {
-            return None;
+    // Each loop from its least vertex, in order: deterministic.
+    let mut loops = Vec::new();
+    while let Some((&start, _)) = next.first_key_value() {
+        let mut ring = vec![start];
+        let mut v = next.remove(&start)?;
+        while v != start {
+            ring.push(v);
+            v = next.remove(&v)?;
         }
-        ring.push(v);
-        v = *next.get(&v)?;
+        loops.push(ring);
     }
-    (ring.len() == next.len()).then_some(ring)
+    (!loops.is_empty()).then_some(loops)
 }
 
 #[cfg(test)]
@@ -375,10 +416,11 @@ mod tests {
     use super::*;
 
     /// A 3 × 3 grid of squares (two triangles each): its boundary is one
-    /// loop of 12 vertices; without the middle square, two loops (refused);
-    /// two squares meeting at a corner only pinch a vertex (refused).
+    /// loop of 12 vertices; without the middle square, two loops, the hole
+    /// wound against the outer one; two squares meeting at a corner only
+    /// pinch a vertex (refused).
     #[test]
-    fn the_boundary_is_one_simple_loop_or_nothing() {
+    fn the_boundary_is_simple_loops_or_nothing() {
         let id = |i: u32, j: u32| j * 4 + i;
         let mut triangles = Vec::new();
         for j in 0..3 {
@@ -387,17 +429,26 @@ mod tests {
                 triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
             }
         }
+        let at = |v: u32| Vec2::new(f64::from(v % 4), f64::from(v / 4));
+        let area = |ring: &Vec<u32>| {
+            twice_signed_area(&ring.iter().map(|&v| at(v)).collect::<Vec<_>>()) / 2.0
+        };
         let all = vec![true; 18];
-        let ring = boundary_loop(&triangles, &all, |_| true).unwrap();
-        assert_eq!(ring.len(), 12);
+        let rims = boundary_loops(&triangles, &all, |_| true).unwrap();
+        assert_eq!(rims.len(), 1);
+        assert_eq!(rims[0].len(), 12);
+        assert_eq!(area(&rims[0]), 9.0);
         let mut holed = all.clone();
         holed[8] = false;
         holed[9] = false;
-        assert!(boundary_loop(&triangles, &holed, |_| true).is_none());
+        let rims = boundary_loops(&triangles, &holed, |_| true).unwrap();
+        let mut areas: Vec<f64> = rims.iter().map(area).collect();
+        areas.sort_by(f64::total_cmp);
+        assert_eq!(areas, [-1.0, 9.0]);
         let mut pinched = vec![false; 18];
         for t in [0, 1, 8, 9] {
             pinched[t] = true;
         }
-        assert!(boundary_loop(&triangles, &pinched, |_| true).is_none());
+        assert!(boundary_loops(&triangles, &pinched, |_| true).is_none());
     }
 }
