@@ -304,7 +304,11 @@ impl Split {
             mesh.triangles.push(tri);
             source.push((device_id, u64::from(face)));
         }
-        Some(Traced { mesh, source })
+        // without the lid's vertices, which nothing uses now
+        Some(Traced {
+            mesh: compacted(mesh),
+            source,
+        })
     }
 }
 

@@ -41,6 +41,11 @@ proptest! {
                 let whole = build_mold_with(&design, &device, &params, &Silent, HalfCut::Whole).unwrap();
                 prop_assert!(triangles(&mold.top) == triangles(&whole.top), "top halves differ");
                 prop_assert!(triangles(&mold.bottom) == triangles(&whole.bottom), "bottom halves differ");
+                for half in [&mold.top, &mold.bottom] {
+                    let mut used = vec![false; half.positions.len()];
+                    half.triangles.iter().flatten().for_each(|&v| used[v as usize] = true);
+                    prop_assert!(used.iter().all(|&u| u), "a half has unused vertices");
+                }
             }
             Err(e @ MoldError::DoesNotFit { .. }) => {
                 prop_assert!(!e.to_string().is_empty());
