@@ -53,7 +53,8 @@ pub struct Split {
 /// Splits the region on `side` (+1 above the parting surface, −1 below)
 /// whose device faces of `kind` are the cavity's. `clear` are the xy boxes
 /// (min, max) of everything that will be cut from it; `cap_z` its cap's
-/// height. `None` where the patch is not one disc or a check fails.
+/// height. `None` where the patch is not one piece (an outer rim and holes) or a
+/// check fails.
 pub fn split(
     region: &Region,
     posed: &PosedDevice,
