@@ -8,6 +8,12 @@
 //! traverse that ourselves: the nearest child first, every child box tested
 //! in two SSE halves. The quantised boxes cost obvhs's own traversal about
 //! as much to decode at every visit as the box tests themselves.
+//!
+//! A path through a closed mesh knows which side of it it is on, and from
+//! outside it can first meet only a face it enters through (from inside,
+//! one it leaves through). Each slot also bounds the z of its triangles'
+//! normals, which skips the slots whose triangles all face the other way:
+//! near a ray's origin, that is the surface it just crossed.
 
 use glam::{DMat3, DVec3};
 use moirecast_kernel::Mesh;
@@ -54,13 +60,16 @@ fn depth(bvh: &CwBvh) -> u32 {
 #[repr(C, align(32))]
 struct WideNode {
     bounds: [[f32; 8]; 6],
+    /// [lowest, highest] z component of the unit normals under each slot.
+    normal_z: [[f32; 8]; 2],
     child: [u32; 8],
 }
 
 impl WideNode {
     /// Decodes a CWBVH node; `pad` widens every box on every side.
-    fn decode(node: &obvhs::cwbvh::node::CwBvhNode, pad: f32) -> Self {
+    fn decode(node: &obvhs::cwbvh::node::CwBvhNode, pad: f32, normal_z: [[f32; 8]; 2]) -> Self {
         let mut out = WideNode {
+            normal_z,
             bounds: [
                 [f32::INFINITY; 8],
                 [f32::INFINITY; 8],
@@ -90,6 +99,63 @@ impl WideNode {
         }
         out
     }
+}
+
+/// Per node, per slot: the lowest and highest z of the unit normals of the
+/// triangles under it, rounded outwards to f32 (empty slots: an empty
+/// range, +∞ to −∞).
+fn normal_z_ranges(bvh: &CwBvh, mesh: &Mesh) -> Vec<[[f32; 8]; 2]> {
+    let normal_z = |t: u32| {
+        let [a, b, c] = mesh.triangles[t as usize].map(|i| mesh.positions[i as usize]);
+        (b - a).cross(c - a).normalize_or_zero().z
+    };
+    let mut out = vec![[[f32::INFINITY; 8], [f32::NEG_INFINITY; 8]]; bvh.nodes.len()];
+    // parents before children, breadth first; filled in reverse
+    let mut order = vec![0u32];
+    let mut i = 0;
+    while i < order.len() {
+        let node = &bvh.nodes[order[i] as usize];
+        for slot in 0..8 {
+            if !node.is_child_empty(slot) && !node.is_leaf(slot) {
+                order.push(node.child_node_index(slot));
+            }
+        }
+        i += 1;
+    }
+    for &n in order.iter().rev() {
+        let node = &bvh.nodes[n as usize];
+        for slot in 0..8 {
+            if node.is_child_empty(slot) {
+                continue;
+            }
+            let (lo, hi) = if node.is_leaf(slot) {
+                let (first, count) = node.child_primitives(slot);
+                (first..first + count)
+                    .map(|id| normal_z(bvh.primitive_indices[id as usize]))
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), z| {
+                        (lo.min(z), hi.max(z))
+                    })
+            } else {
+                let [lo, hi] = out[node.child_node_index(slot) as usize];
+                let lo = lo.iter().fold(f32::INFINITY, |m, &z| m.min(z));
+                let hi = hi.iter().fold(f32::NEG_INFINITY, |m, &z| m.max(z));
+                (lo as f64, hi as f64)
+            };
+            // outwards by more than the rounding to f32 and the normals' error
+            out[n as usize][0][slot] = (lo - 1e-6) as f32;
+            out[n as usize][1][slot] = (hi + 1e-6) as f32;
+        }
+    }
+    out
+}
+
+/// Which side of the mesh a ray starts on, and so which triangles it can
+/// meet first: from outside a closed, outward-oriented mesh, one it enters
+/// through; from inside, one it leaves through.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    Outside,
+    Inside,
 }
 
 /// The nearest intersection of a ray with the mesh.
@@ -169,7 +235,13 @@ impl<'m> Scene<'m> {
         // them all with room to spare.
         let (lo, hi) = mesh.bounds();
         let pad = (lo.abs().max(hi.abs()).max_element() as f32).max(1.0) * 2f32.powi(-16);
-        let nodes = bvh.nodes.iter().map(|n| WideNode::decode(n, pad)).collect();
+        let ranges = normal_z_ranges(&bvh, mesh);
+        let nodes = bvh
+            .nodes
+            .iter()
+            .zip(ranges)
+            .map(|(n, r)| WideNode::decode(n, pad, r))
+            .collect();
         let corners = bvh
             .primitive_indices
             .iter()
@@ -198,10 +270,22 @@ impl<'m> Scene<'m> {
     /// The nearest hit along `origin + t·dir` with `t > t_min` (dir unit);
     /// of hits at equal t, the lowest triangle index.
     pub fn intersect(&self, origin: DVec3, dir: DVec3, t_min: f64) -> Option<Hit> {
+        self.nearest(origin, dir, t_min, None)
+    }
+
+    /// [`Scene::intersect`] for a ray that starts on `side` of the mesh:
+    /// the nearest hit among the triangles facing that side (dot(dir, n) < 0
+    /// from outside, > 0 from inside). On a closed mesh that is the nearest
+    /// hit; boxes whose triangles all face the other way are skipped.
+    pub fn intersect_from(&self, side: Side, origin: DVec3, dir: DVec3, t_min: f64) -> Option<Hit> {
+        self.nearest(origin, dir, t_min, Some(side))
+    }
+
+    fn nearest(&self, origin: DVec3, dir: DVec3, t_min: f64, side: Option<Side>) -> Option<Hit> {
         if self.nodes.is_empty() {
             return None;
         }
-        let slabs = Slabs::new(origin, dir);
+        let slabs = Slabs::new(origin, dir, side);
         let sheared = ShearedRay::new(origin, dir);
         // (t, triangle, its place in leaf order)
         let mut best = (f64::INFINITY, u32::MAX, 0);
@@ -223,7 +307,10 @@ impl<'m> Scene<'m> {
                 let first = (entry & ((1 << LEAF_FIRST_BITS) - 1)) as usize;
                 let count = ((entry & !LEAF) >> LEAF_FIRST_BITS) as usize;
                 for id in first..first + count {
-                    if let Some(t) = sheared.intersect(&self.corners[id]) {
+                    if let Some((t, entering)) = sheared.intersect_facing(&self.corners[id]) {
+                        if side.is_some_and(|s| (s == Side::Outside) != entering) {
+                            continue;
+                        }
                         let tri = self.primitive_indices[id];
                         if t > t_min && (t < best.0 || (t == best.0 && tri < best.1)) {
                             best = (t, tri, id);
@@ -275,10 +362,28 @@ struct Slabs {
     /// it travels up the axis, else the max row) and the row it leaves by.
     enter_row: [usize; 3],
     leave_row: [usize; 3],
+    /// A slot is kept only if its normals' z range reaches up to
+    /// `normal_z_floor` and down to `normal_z_ceiling`: outside those, all
+    /// its triangles face away from the ray's side.
+    normal_z_floor: f32,
+    normal_z_ceiling: f32,
 }
 
 impl Slabs {
-    fn new(origin: DVec3, dir: DVec3) -> Self {
+    fn new(origin: DVec3, dir: DVec3, side: Option<Side>) -> Self {
+        // With ψ the angle between the ray and the pole (±z) it heads to
+        // and sin ψ = |dir_xy|, a normal within 90° − ψ of that pole faces
+        // along the ray (dot > 0), one within 90° − ψ of the other pole
+        // against it (dot < 0). Outside, a ray heading down can meet no
+        // slot whose normals all have z < −sin ψ; inside, none whose
+        // normals all have z > sin ψ; heading up, the other way round.
+        let sin_psi = (dir.x * dir.x + dir.y * dir.y).sqrt().min(1.0) as f32 * (1.0 + 1e-6) + 1e-6;
+        let down = dir.z <= 0.0;
+        let (floor, ceiling) = match side {
+            None => (f32::NEG_INFINITY, f32::INFINITY),
+            Some(s) if (s == Side::Outside) == down => (-sin_psi, f32::INFINITY),
+            Some(_) => (f32::NEG_INFINITY, sin_psi),
+        };
         // no zero components: a tiny one keeps every product finite and
         // every comparison ordered (±0 would make 0·∞ = NaN)
         let d = dir.to_array().map(|c| {
@@ -295,6 +400,8 @@ impl Slabs {
             inverse: d.map(|c| 1.0 / c),
             enter_row: [0, 1, 2].map(|a| if up[a] { a } else { a + 3 }),
             leave_row: [0, 1, 2].map(|a| if up[a] { a + 3 } else { a }),
+            normal_z_floor: floor,
+            normal_z_ceiling: ceiling,
         }
     }
 
@@ -321,7 +428,9 @@ impl Slabs {
                     t1 = if l < t1 { l } else { t1 };
                 }
                 near[slot] = t0;
-                mask |= ((t0 <= t1) as u32) << slot;
+                let facing = node.normal_z[1][slot] >= self.normal_z_floor
+                    && node.normal_z[0][slot] <= self.normal_z_ceiling;
+                mask |= ((t0 <= t1 && facing) as u32) << slot;
             }
             (mask, near)
         }
@@ -348,7 +457,14 @@ impl Slabs {
                     t1 = _mm_min_ps(t1, _mm_mul_ps(_mm_sub_ps(l, o), inv));
                 }
                 _mm_storeu_ps(near.as_mut_ptr().add(4 * half), t0);
-                mask |= (_mm_movemask_ps(_mm_cmple_ps(t0, t1)) as u32) << (4 * half);
+                let lo = _mm_loadu_ps(node.normal_z[0].as_ptr().add(4 * half));
+                let hi = _mm_loadu_ps(node.normal_z[1].as_ptr().add(4 * half));
+                let facing = _mm_and_ps(
+                    _mm_cmpge_ps(hi, _mm_set1_ps(self.normal_z_floor)),
+                    _mm_cmple_ps(lo, _mm_set1_ps(self.normal_z_ceiling)),
+                );
+                let keep = _mm_and_ps(_mm_cmple_ps(t0, t1), facing);
+                mask |= (_mm_movemask_ps(keep) as u32) << (4 * half);
             }
         }
         (mask, near)
@@ -389,6 +505,14 @@ impl ShearedRay {
     /// of them... or both, at the same t.
     #[inline]
     pub fn intersect(&self, corners: &[DVec3; 3]) -> Option<f64> {
+        self.intersect_facing(corners).map(|(t, _)| t)
+    }
+
+    /// [`ShearedRay::intersect`], and whether the ray enters through the
+    /// triangle's front (dot(dir, n) < 0, n by the corners' winding):
+    /// decided by the same determinant, so consistently with the hit.
+    #[inline]
+    pub fn intersect_facing(&self, corners: &[DVec3; 3]) -> Option<(f64, bool)> {
         let DVec3 {
             x: ax,
             y: ay,
@@ -414,7 +538,7 @@ impl ShearedRay {
         if det == 0.0 {
             return None;
         }
-        Some((u * az + v * bz + w * cz) * self.sz / det)
+        Some(((u * az + v * bz + w * cz) * self.sz / det, det > 0.0))
     }
 }
 
@@ -433,7 +557,8 @@ mod tests {
 
     /// The BVH finds exactly the nearest hit a brute-force scan of every
     /// triangle finds, on a device mesh, for random rays and for rays along
-    /// the axes (with −0.0 components).
+    /// the axes (with −0.0 components); from either side too, among the
+    /// triangles facing it.
     #[test]
     fn bvh_hits_are_the_brute_force_hits() {
         let mut p =
@@ -442,16 +567,17 @@ mod tests {
         let design = Design::new(p).unwrap();
         let dm = mesh_device(&design, &Silent).unwrap();
         let scene = Scene::new(&dm.mesh);
-        let brute = |o: DVec3, d: DVec3| {
+        let brute = |o: DVec3, d: DVec3, side: Option<Side>| {
+            let ray = ShearedRay::new(o, d);
             (0..dm.mesh.triangles.len() as u32)
                 .filter_map(|t| {
-                    watertight(
+                    ray.intersect_facing(
                         &dm.mesh.triangles[t as usize].map(|i| dm.mesh.positions[i as usize]),
-                        o,
-                        d,
                     )
-                    .filter(|&x| x > 1e-9)
-                    .map(|x| (x, t))
+                    .filter(|&(x, entering)| {
+                        x > 1e-9 && side.is_none_or(|s| (s == Side::Outside) == entering)
+                    })
+                    .map(|(x, _)| (x, t))
                 })
                 .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
         };
@@ -469,20 +595,102 @@ mod tests {
                 rays.push((DVec3::new(0.3, -0.2, 0.0) - 3.0 * s * axis, s * axis));
             }
         }
-        let mut hits = 0;
+        let mut hits = [0; 3];
         for (o, d) in rays {
-            let got = scene.intersect(o, d, 1e-9).map(|h| (h.t, h.triangle));
-            let want = brute(o, d);
-            match (got, want) {
-                (Some(g), Some(w)) => {
-                    hits += 1;
-                    assert!((g.0 - w.0).abs() <= 1e-12 * w.0.max(1.0), "{g:?} vs {w:?}");
+            for (k, side) in [None, Some(Side::Outside), Some(Side::Inside)]
+                .into_iter()
+                .enumerate()
+            {
+                let got = match side {
+                    None => scene.intersect(o, d, 1e-9),
+                    Some(s) => scene.intersect_from(s, o, d, 1e-9),
+                };
+                let got = got.map(|h| (h.t, h.triangle));
+                let want = brute(o, d, side);
+                match (got, want) {
+                    (Some(g), Some(w)) => {
+                        hits[k] += 1;
+                        assert!((g.0 - w.0).abs() <= 1e-12 * w.0.max(1.0), "{g:?} vs {w:?}");
+                    }
+                    (None, None) => {}
+                    _ => panic!("ray {o} {d} {side:?}: BVH {got:?}, brute force {want:?}"),
                 }
-                (None, None) => {}
-                _ => panic!("ray {o} {d}: BVH {got:?}, brute force {want:?}"),
             }
         }
-        assert!(hits > 500, "{hits} rays hit");
+        assert!(hits.iter().all(|&h| h > 300), "{hits:?} rays hit");
+    }
+
+    /// The watertight test's determinant says which way the ray crosses:
+    /// into the triangle's front exactly where dot(dir, n) < 0.
+    #[test]
+    fn the_determinant_says_which_way_a_triangle_faces() {
+        let mut rng = SplitMix64(9);
+        let mut r = || 2.0 * rng.next_f64() - 1.0;
+        let mut hits = 0;
+        for _ in 0..20_000 {
+            let corners = [(); 3].map(|_| DVec3::new(r(), r(), r()));
+            let d = DVec3::new(r(), r(), r()).normalize();
+            let o = -2.0 * d + 0.3 * DVec3::new(r(), r(), r());
+            let n = (corners[1] - corners[0]).cross(corners[2] - corners[0]);
+            if let Some((_, entering)) = ShearedRay::new(o, d).intersect_facing(&corners) {
+                hits += 1;
+                assert_eq!(entering, d.dot(n) < 0.0, "{corners:?} {o} {d}");
+            }
+        }
+        assert!(hits > 1000, "{hits} hits");
+    }
+
+    /// On a closed device mesh, a path's side predicts what it meets: the
+    /// nearest hit of all is the nearest facing the side the path is on,
+    /// over paths refracted and reflected through the device.
+    #[test]
+    fn a_path_meets_only_faces_turned_to_its_side() {
+        let mut p =
+            DesignParams::with_defaults(PitchSurface::Saddle { radius: 40.0 }, 6.0, 5.0, 0.5);
+        p.profile = Profile::Bump { sigma: 1.5 };
+        let design = Design::new(p).unwrap();
+        let dm = mesh_device(&design, &Silent).unwrap();
+        let scene = Scene::new(&dm.mesh);
+        let mut rng = SplitMix64(13);
+        let (mut segments, mut inside) = (0, 0);
+        for _ in 0..2000 {
+            let tilt = 0.6 * (rng.next_f64() - 0.5);
+            let mut d = DVec3::new(tilt.sin(), 0.2 * tilt, -tilt.cos()).normalize();
+            let mut o = DVec3::new(6.0 * rng.next_f64() - 3.0, 5.0 * rng.next_f64() - 2.5, 5.0);
+            let mut side = Side::Outside;
+            for _ in 0..8 {
+                let all = scene.intersect(o, d, 1e-7);
+                assert_eq!(
+                    all,
+                    scene.intersect_from(side, o, d, 1e-7),
+                    "{o} {d} {side:?}"
+                );
+                segments += 1;
+                inside += (side == Side::Inside) as usize;
+                let Some(hit) = all else { break };
+                let leaving = d.dot(hit.normal) > 0.0;
+                assert_eq!(leaving, side == Side::Inside);
+                let (n, n1, n2) = if leaving {
+                    (-hit.normal, 1.5, 1.0)
+                } else {
+                    (hit.normal, 1.0, 1.5)
+                };
+                o += hit.t * d;
+                let r = crate::optics::fresnel(-d.dot(n), n1, n2);
+                d = match crate::optics::refract(d, n, n1, n2) {
+                    // refract more often than Fresnel says: more crossings
+                    Some(t) if rng.next_f64() >= r.max(0.3) => {
+                        side = if leaving { Side::Outside } else { Side::Inside };
+                        t
+                    }
+                    _ => crate::optics::reflect(d, n),
+                };
+            }
+        }
+        assert!(
+            segments > 5000 && inside > 1500,
+            "{segments} segments, {inside} inside"
+        );
     }
 
     /// Rays straight down onto a 40 mm plane device, where coordinates are

@@ -5,7 +5,7 @@
 //! where it ends, not a colour: the lighting is applied afterwards.
 
 use crate::optics::{fresnel, reflect, refract};
-use crate::scene::Scene;
+use crate::scene::{Scene, Side};
 use glam::DVec3;
 
 /// SplitMix64 (Steele, Lea and Flood 2014): small, fast, reproducible.
@@ -56,8 +56,10 @@ pub fn trace_path(
     rng: &mut SplitMix64,
 ) -> PathEnd {
     let mut first = None;
+    // the path starts outside, and crosses the surface where it refracts
+    let mut side = Side::Outside;
     for _ in 0..MAX_BOUNCES {
-        let Some(hit) = scene.intersect(origin, dir, EPSILON_MM) else {
+        let Some(hit) = scene.intersect_from(side, origin, dir, EPSILON_MM) else {
             return PathEnd {
                 first,
                 leaves: Some(dir),
@@ -76,7 +78,10 @@ pub fn trace_path(
         };
         let r = fresnel(-dir.dot(normal), n1, n2);
         dir = match refract(dir, normal, n1, n2) {
-            Some(t) if rng.next_f64() >= r => t,
+            Some(t) if rng.next_f64() >= r => {
+                side = if leaving { Side::Outside } else { Side::Inside };
+                t
+            }
             _ => reflect(dir, normal),
         };
         origin = point;
