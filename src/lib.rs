@@ -296,6 +296,13 @@ pub struct MoldOutcome {
     pub triangles: [usize; 3],
 }
 
+/// An STL the mold command writes: a half, checked when it was cut, or a
+/// construction solid, to be checked as it is written.
+enum ToWrite<'m> {
+    Checked(&'m moirecast_kernel::check::CheckedMesh),
+    Unchecked(&'m moirecast_kernel::Mesh, SolidSpec),
+}
+
 /// `moirecast mold`: builds the device of `spec` and its two-piece mold and
 /// writes `device.stl`, `mold-top.stl`, `mold-bottom.stl`, `assembly.scad`
 /// and `report.json` into `out` — all of them, or nothing.
@@ -323,25 +330,17 @@ pub fn run_mold(
     progress.stage("writing", 1);
     let mut checks: Vec<CheckResult> = build.checks.clone();
     checks.extend(mold.checks.iter().cloned());
-    // Every STL is validated as a solid and encoded, in parallel; the
-    // halves' checks are in `checks` already.
-    let mut jobs: Vec<(String, &moirecast_kernel::Mesh, SolidSpec)> = vec![
-        (
-            "mold-top.stl".into(),
-            &mold.top,
-            SolidSpec::boolean_result(mold.genus_top),
-        ),
-        (
-            "mold-bottom.stl".into(),
-            &mold.bottom,
-            SolidSpec::boolean_result(mold.genus_bottom),
-        ),
+    // Every STL is encoded in parallel: the halves as they were checked
+    // when cut (their checks are in `checks` already), the construction
+    // solids validated here.
+    let mut jobs: Vec<(String, ToWrite)> = vec![
+        ("mold-top.stl".into(), ToWrite::Checked(&mold.top)),
+        ("mold-bottom.stl".into(), ToWrite::Checked(&mold.bottom)),
     ];
     for c in &mold.construction {
         jobs.push((
             format!("construction-{}.stl", c.name),
-            &c.mesh,
-            SolidSpec::boolean_results(0, c.shells),
+            ToWrite::Unchecked(&c.mesh, SolidSpec::boolean_results(0, c.shells)),
         ));
     }
     use rayon::prelude::*;
@@ -349,24 +348,29 @@ pub fn run_mold(
         || SolidMesh::validate(&mold.device),
         || {
             jobs.par_iter()
-                .map(
-                    |(name, mesh, spec)| -> Result<(Vec<u8>, report::FileReport)> {
-                        let (checks, solid) = SolidMesh::validate_for(mesh, *spec);
-                        let Some(solid) = solid else {
-                            let c = checks.iter().find(|c| !c.passed).expect("a failed check");
-                            bail!(
-                                "`{name}` failed check `{}` ({} vs {}: {}); nothing was written",
-                                c.name,
-                                c.value,
-                                c.limit,
-                                c.detail
-                            );
-                        };
-                        let bytes = stl_bytes(name, solid)?;
-                        let file = report::FileReport::of(solid.mesh(), bytes.len());
-                        Ok((bytes, file))
-                    },
-                )
+                .map(|(name, job)| -> Result<(Vec<u8>, report::FileReport)> {
+                    let fresh;
+                    let (checks, solid) = match job {
+                        ToWrite::Checked(mesh) => (mesh.checks(), mesh.solid()),
+                        ToWrite::Unchecked(mesh, spec) => {
+                            fresh = SolidMesh::validate_for(mesh, *spec);
+                            (&fresh.0[..], fresh.1)
+                        }
+                    };
+                    let Some(solid) = solid else {
+                        let c = checks.iter().find(|c| !c.passed).expect("a failed check");
+                        bail!(
+                            "`{name}` failed check `{}` ({} vs {}: {}); nothing was written",
+                            c.name,
+                            c.value,
+                            c.limit,
+                            c.detail
+                        );
+                    };
+                    let bytes = stl_bytes(name, solid)?;
+                    let file = report::FileReport::of(solid.mesh(), bytes.len());
+                    Ok((bytes, file))
+                })
                 .collect::<Vec<_>>()
         },
     );
@@ -390,7 +394,7 @@ pub fn run_mold(
         report::FileReport::of(device.mesh(), device_bytes.len()),
     );
     files.add("device.stl", device_bytes);
-    for ((name, _, _), done) in jobs.iter().zip(encoded) {
+    for ((name, _), done) in jobs.iter().zip(encoded) {
         let (bytes, file) = done?;
         reports.insert(name.clone(), file);
         files.add(name, bytes);
@@ -417,8 +421,8 @@ pub fn run_mold(
         volumes: mold.volumes,
         triangles: [
             mold.device.triangles.len(),
-            mold.top.triangles.len(),
-            mold.bottom.triangles.len(),
+            mold.top.mesh().triangles.len(),
+            mold.bottom.mesh().triangles.len(),
         ],
     })
 }

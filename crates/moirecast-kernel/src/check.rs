@@ -324,9 +324,10 @@ fn f32_rounding_faults(mesh: &Mesh) -> (usize, usize) {
     (flipped, merged)
 }
 
-/// A mesh that passed every solid check. Only [`SolidMesh::validate`] makes
-/// one, so a writer that takes it cannot write an unchecked mesh, and no
-/// mesh is checked twice.
+/// A mesh that passed every solid check. Only [`SolidMesh::validate`] and
+/// [`CheckedMesh::solid`] (from the checks it ran itself) make one, so a
+/// writer that takes it cannot write an unchecked mesh, and no mesh is
+/// checked twice.
 #[derive(Clone, Copy, Debug)]
 pub struct SolidMesh<'a> {
     mesh: &'a Mesh,
@@ -350,6 +351,41 @@ impl<'a> SolidMesh<'a> {
 
     pub fn mesh(&self) -> &'a Mesh {
         self.mesh
+    }
+}
+
+/// A mesh that owns its solid checks: [`SolidMesh`] for a mesh that must
+/// outlive the place it was checked in (a mold's halves are checked as
+/// they are cut and written at the end). Only [`CheckedMesh::check`] makes
+/// one, and the mesh cannot be changed after.
+#[derive(Clone, Debug)]
+pub struct CheckedMesh {
+    mesh: Mesh,
+    checks: Vec<CheckResult>,
+}
+
+impl CheckedMesh {
+    /// Runs [`solid_checks_for`] on `mesh` against `spec`.
+    pub fn check(mesh: Mesh, spec: SolidSpec) -> Self {
+        let checks = solid_checks_for(&mesh, spec);
+        CheckedMesh { mesh, checks }
+    }
+
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
+    }
+
+    /// The checks, passed or failed.
+    pub fn checks(&self) -> &[CheckResult] {
+        &self.checks
+    }
+
+    /// The mesh as a [`SolidMesh`] if every check passed; not checked again.
+    pub fn solid(&self) -> Option<SolidMesh<'_>> {
+        self.checks
+            .iter()
+            .all(|c| c.passed)
+            .then_some(SolidMesh { mesh: &self.mesh })
     }
 }
 

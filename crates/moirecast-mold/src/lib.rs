@@ -23,7 +23,7 @@ use boolean::{
 };
 use glam::{DVec2, DVec3};
 use manifold_rust::manifold::Manifold;
-use moirecast_kernel::check::{solid_checks_for, solid_checks_of_genus, CheckResult, SolidSpec};
+use moirecast_kernel::check::{solid_checks_of_genus, CheckResult, CheckedMesh, SolidSpec};
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{Design, DeviceMesh, Mesh};
 use parting::{Face, Floor, HeightQuery, PartSide, PosedDevice, Region};
@@ -73,8 +73,9 @@ pub struct Volumes {
 pub struct Mold {
     /// The cavity's shape: the device in the mold frame (flipped, scaled).
     pub device: Mesh,
-    pub top: Mesh,
-    pub bottom: Mesh,
+    /// The halves, with the solid checks they passed as they were cut.
+    pub top: CheckedMesh,
+    pub bottom: CheckedMesh,
     pub features: Features,
     pub volumes: Volumes,
     pub draft_top: Draft,
@@ -115,33 +116,37 @@ fn sliver_free(
 ) -> Result<Option<Half>> {
     let half = checked(what, half)?;
     let spec = SolidSpec::boolean_result(genus);
-    let Some(mesh) = join(to_mesh(&half)) else {
+    let checked_half = |traced: boolean::Traced| Half {
+        solid: CheckedMesh::check(traced.mesh, spec),
+        source: traced.source,
+    };
+    let Some(traced) = join(to_mesh(&half)) else {
         return Ok(None);
     };
-    let checks = solid_checks_for(&mesh.mesh, spec);
-    let m = &mesh.mesh;
+    let done = checked_half(traced);
+    let m = done.solid.mesh();
     let shortest = m
         .triangles
         .par_iter()
         .flat_map_iter(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
         .map(|(a, b)| m.positions[a as usize].distance(m.positions[b as usize]))
         .reduce(|| f64::INFINITY, f64::min);
-    if shortest >= SLIVER_MM && !has_slivers(&checks) {
-        return Ok(Some((mesh, checks)));
+    if shortest >= SLIVER_MM && !has_slivers(done.solid.checks()) {
+        return Ok(Some(done));
     }
     let half = checked(
         format!("{what}, slivers collapsed"),
         half.simplify(SLIVER_MM),
     )?;
-    let Some(mesh) = join(to_mesh(&half)) else {
-        return Ok(None);
-    };
-    let checks = solid_checks_for(&mesh.mesh, spec);
-    Ok(Some((mesh, checks)))
+    Ok(join(to_mesh(&half)).map(checked_half))
 }
 
-/// A half's mesh, traced, with its solid checks.
-type Half = (boolean::Traced, Vec<CheckResult>);
+/// A half, with its solid checks, and for each triangle the original ID of
+/// the mesh it came from and its face there (as [`boolean::Traced`]).
+struct Half {
+    solid: CheckedMesh,
+    source: Vec<(u32, u64)>,
+}
 
 /// The bottom and top rings of a vertical key frustum over `centre`, as
 /// the bottom region builds its bump from them: vertex k of each on the
@@ -553,7 +558,7 @@ pub fn build_mold_with(
     // the channels are built again turned a quarter facet.
     let mut turned_note = None;
     let mut channels_in_block = channels_in_block;
-    if has_slivers(&top_h.1) || has_slivers(&bottom_h.1) {
+    if has_slivers(top_h.solid.checks()) || has_slivers(bottom_h.solid.checks()) {
         (fill, channels, top_cut) = channels_turned(boolean::QUARTER_FACET_DEG)?;
         channels_in_block = checked("channels in the block", channels.intersection(&block))?;
         let (t, b) = rayon::join(
@@ -572,13 +577,13 @@ pub fn build_mold_with(
         "channels in the cavity",
         beside_top.difference(&bottom_before),
     )?;
-    let ((top_t, top_checks), (bottom_t, bottom_checks)) = (top_h, bottom_h);
     progress.tick(1);
 
     progress.stage("mold solid checks", 1);
     let mut checks = Vec::new();
-    for (name, cs) in [("top", top_checks), ("bottom", bottom_checks)] {
-        for mut c in cs {
+    for (name, h) in [("top", &top_h), ("bottom", &bottom_h)] {
+        for c in h.solid.checks() {
+            let mut c = c.clone();
             c.detail = format!("mold-{name}: {}", c.detail);
             checks.push(c);
         }
@@ -592,7 +597,7 @@ pub fn build_mold_with(
     // them. Keys lie outside the outline (checked when they were placed),
     // where the block above the parting surface is the top half before its
     // channels.
-    let (v_top, v_bottom) = (top_t.mesh.volume(), bottom_t.mesh.volume());
+    let (v_top, v_bottom) = (top_h.solid.mesh().volume(), bottom_h.solid.mesh().volume());
     let v_device = posed.mesh.volume();
     let v_block = (f.block_hi - f.block_lo).element_product();
     let clearances = checked(
@@ -674,19 +679,20 @@ pub fn build_mold_with(
     // their source triangles, and cover it but for the channel openings.
     let (mut worst_off, mut worst_at) = (0.0f64, DVec3::ZERO);
     let mut cavity_area = 0.0;
-    for traced in [&top_t, &bottom_t] {
-        for (t, &(id, face)) in traced.mesh.triangles.iter().zip(&traced.source) {
+    for half in [&top_h, &bottom_h] {
+        let mesh = half.solid.mesh();
+        for (t, &(id, face)) in mesh.triangles.iter().zip(&half.source) {
             if id != device_id {
                 continue;
             }
-            cavity_area += traced.mesh.triangle_area(t);
+            cavity_area += mesh.triangle_area(t);
             let Some(src) = posed.mesh.triangles.get(face as usize) else {
                 worst_off = f64::INFINITY;
                 continue;
             };
             let [a, b, c] = src.map(|i| posed.mesh.positions[i as usize]);
             for &v in t {
-                let q = traced.mesh.positions[v as usize];
+                let q = mesh.positions[v as usize];
                 let mut off = distance_to(q, [a, b, c]);
                 if off > CAVITY_ON_DEVICE_MM {
                     // The booleans may move a vertex within a plane of
@@ -788,8 +794,8 @@ pub fn build_mold_with(
 
     Ok(Mold {
         device: posed.mesh,
-        top: top_t.mesh,
-        bottom: bottom_t.mesh,
+        top: top_h.solid,
+        bottom: bottom_h.solid,
         volumes: Volumes {
             block: v_block,
             top: v_top,
@@ -841,6 +847,7 @@ pub fn build_mold_with(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use moirecast_kernel::check::solid_checks_for;
 
     /// `sliver_free` picks its checks by name: every name must be one the
     /// kernel's solid checks report, or a renamed check would silently stop

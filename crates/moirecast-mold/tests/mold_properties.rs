@@ -39,9 +39,9 @@ proptest! {
                 prop_assert!(mold.checks.iter().any(|c| c.name == "mold-parts-tile-block"));
                 // Cutting each half whole gives the very same triangles.
                 let whole = build_mold_with(&design, &device, &params, &Silent, HalfCut::Whole).unwrap();
-                prop_assert!(triangles(&mold.top) == triangles(&whole.top), "top halves differ");
-                prop_assert!(triangles(&mold.bottom) == triangles(&whole.bottom), "bottom halves differ");
-                for half in [&mold.top, &mold.bottom] {
+                prop_assert!(triangles(mold.top.mesh()) == triangles(whole.top.mesh()), "top halves differ");
+                prop_assert!(triangles(mold.bottom.mesh()) == triangles(whole.bottom.mesh()), "bottom halves differ");
+                for half in [mold.top.mesh(), mold.bottom.mesh()] {
                     let mut used = vec![false; half.positions.len()];
                     half.triangles.iter().flatten().for_each(|&v| used[v as usize] = true);
                     prop_assert!(used.iter().all(|&u| u), "a half has unused vertices");
