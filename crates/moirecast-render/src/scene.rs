@@ -555,24 +555,33 @@ mod tests {
     use moirecast_kernel::progress::Silent;
     use moirecast_kernel::{Design, DesignParams, PitchSurface, Profile};
 
+    /// The mesh of a device `width` × `height` mm (period 0.5 mm).
+    fn device_mesh(surface: PitchSurface, width: f64, height: f64, profile: Profile) -> Mesh {
+        let mut p = DesignParams::with_defaults(surface, width, height, 0.5);
+        p.profile = profile;
+        mesh_device(&Design::new(p).unwrap(), &Silent).unwrap().mesh
+    }
+
+    /// A saddle device (radius 40 mm) with a bump profile of `sigma` mm.
+    fn saddle_with_bump(width: f64, height: f64, sigma: f64) -> Mesh {
+        let saddle = PitchSurface::Saddle { radius: 40.0 };
+        device_mesh(saddle, width, height, Profile::Bump { sigma })
+    }
+
     /// The BVH finds exactly the nearest hit a brute-force scan of every
     /// triangle finds, on a device mesh, for random rays and for rays along
     /// the axes (with −0.0 components); from either side too, among the
     /// triangles facing it.
     #[test]
     fn bvh_hits_are_the_brute_force_hits() {
-        let mut p =
-            DesignParams::with_defaults(PitchSurface::Saddle { radius: 40.0 }, 4.0, 3.0, 0.5);
-        p.profile = Profile::Bump { sigma: 1.0 };
-        let design = Design::new(p).unwrap();
-        let dm = mesh_device(&design, &Silent).unwrap();
-        let scene = Scene::new(&dm.mesh);
+        let mesh = saddle_with_bump(4.0, 3.0, 1.0);
+        let scene = Scene::new(&mesh);
         let brute = |o: DVec3, d: DVec3, side: Option<Side>| {
             let ray = ShearedRay::new(o, d);
-            (0..dm.mesh.triangles.len() as u32)
+            (0..mesh.triangles.len() as u32)
                 .filter_map(|t| {
                     ray.intersect_facing(
-                        &dm.mesh.triangles[t as usize].map(|i| dm.mesh.positions[i as usize]),
+                        &mesh.triangles[t as usize].map(|i| mesh.positions[i as usize]),
                     )
                     .filter(|&(x, entering)| {
                         x > 1e-9 && side.is_none_or(|s| (s == Side::Outside) == entering)
@@ -645,12 +654,8 @@ mod tests {
     /// over paths refracted and reflected through the device.
     #[test]
     fn a_path_meets_only_faces_turned_to_its_side() {
-        let mut p =
-            DesignParams::with_defaults(PitchSurface::Saddle { radius: 40.0 }, 6.0, 5.0, 0.5);
-        p.profile = Profile::Bump { sigma: 1.5 };
-        let design = Design::new(p).unwrap();
-        let dm = mesh_device(&design, &Silent).unwrap();
-        let scene = Scene::new(&dm.mesh);
+        let mesh = saddle_with_bump(6.0, 5.0, 1.5);
+        let scene = Scene::new(&mesh);
         let mut rng = SplitMix64(13);
         let (mut segments, mut inside) = (0, 0);
         for _ in 0..2000 {
@@ -699,12 +704,14 @@ mod tests {
     /// under obvhs's own traversal (unpadded boxes), 1 ray in 600,000.
     #[test]
     fn no_ray_slips_between_the_f32_boxes() {
-        let mut p = DesignParams::with_defaults(PitchSurface::Plane, 40.0, 40.0, 0.5);
-        p.profile = Profile::Rings { wavelength: 10.0 };
-        let design = Design::new(p).unwrap();
-        let dm = mesh_device(&design, &Silent).unwrap();
-        let scene = Scene::new(&dm.mesh);
-        let corners = |t: u32| dm.mesh.triangles[t as usize].map(|i| dm.mesh.positions[i as usize]);
+        let mesh = device_mesh(
+            PitchSurface::Plane,
+            40.0,
+            40.0,
+            Profile::Rings { wavelength: 10.0 },
+        );
+        let scene = Scene::new(&mesh);
+        let corners = |t: u32| mesh.triangles[t as usize].map(|i| mesh.positions[i as usize]);
         let mut rng = SplitMix64(7);
         let mut rays = vec![DVec3::new(10.720926675211928, 1.1977738528647492, 10.0)];
         rays.extend((0..40).map(|_| {
@@ -716,7 +723,7 @@ mod tests {
         }));
         for o in rays {
             let d = DVec3::NEG_Z;
-            let want = (0..dm.mesh.triangles.len() as u32)
+            let want = (0..mesh.triangles.len() as u32)
                 .filter_map(|t| watertight(&corners(t), o, d).map(|x| (x, t)))
                 .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
             let got = scene.intersect(o, d, 0.0).map(|h| (h.t, h.triangle));
