@@ -27,6 +27,8 @@ use std::mem::MaybeUninit;
 const STACK: usize = 512;
 /// Deepest tree the stack holds.
 const MAX_BVH_DEPTH: u32 = ((STACK - 1) / 7) as u32;
+/// A tree from obvhs's medium build this deep is rebuilt with its slow build.
+const REBUILD_DEPTH: u32 = 30;
 /// A child slot holds no child.
 const EMPTY: u32 = u32::MAX;
 /// A child slot is a leaf: bits 28–30 count its triangles (1–3), bits 0–27
@@ -219,7 +221,7 @@ impl<'m> Scene<'m> {
         // The medium build can go deep on many long, thin, stacked
         // triangles (a printed device's layers: depth ≥ 32 where the slow
         // build gives 22); a deep tree is a slow one.
-        if depth(&bvh) >= 30 {
+        if depth(&bvh) >= REBUILD_DEPTH {
             bvh = build(BvhBuildParams::slow_build());
         }
         let d = depth(&bvh);
