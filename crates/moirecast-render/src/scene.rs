@@ -235,7 +235,8 @@ impl<'m> Scene<'m> {
         // more rounding and the slab test adds a few more. Padding every box
         // by 2⁻¹⁶ of the scene's largest coordinate (1.5 µm at 100 mm) covers
         // them all with room to spare.
-        let (lo, hi) = mesh.bounds();
+        let bounds = mesh.bounds();
+        let (lo, hi) = bounds;
         let pad = (lo.abs().max(hi.abs()).max_element() as f32).max(1.0) * 2f32.powi(-16);
         let ranges = normal_z_ranges(&bvh, mesh);
         let nodes = bvh
@@ -255,7 +256,7 @@ impl<'m> Scene<'m> {
             primitive_indices: bvh.primitive_indices,
             corners,
             absorbing: Vec::new(),
-            bounds: mesh.bounds(),
+            bounds,
         }
     }
 
