@@ -2,6 +2,7 @@
 //! measured, the limit, and where the worst case is.
 
 use crate::mesh::Mesh;
+use glam::DVec3;
 use rayon::prelude::*;
 
 /// The outcome of one check.
@@ -273,22 +274,24 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
     out
 }
 
+/// The smallest altitude (mm) of the triangle `[a, b, c]`: twice its area
+/// over its longest edge; 0 for a collapsed one.
+pub fn triangle_altitude([a, b, c]: [DVec3; 3]) -> f64 {
+    let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+    if longest > 0.0 {
+        (b - a).cross(c - a).length() / longest
+    } else {
+        0.0
+    }
+}
+
 /// The smallest altitude of a triangle (mm; 0 for a collapsed one) and the
 /// first triangle that has it.
 fn smallest_altitude(mesh: &Mesh) -> (f64, usize) {
     mesh.triangles
         .par_iter()
         .enumerate()
-        .map(|(i, t)| {
-            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
-            let longest = (b - a).length().max((c - b).length()).max((a - c).length());
-            let alt = if longest > 0.0 {
-                (b - a).cross(c - a).length() / longest
-            } else {
-                0.0
-            };
-            (alt, i)
-        })
+        .map(|(i, t)| (triangle_altitude(t.map(|i| mesh.positions[i as usize])), i))
         .reduce(
             || (f64::INFINITY, 0),
             |x, y| {

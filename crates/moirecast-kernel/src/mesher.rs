@@ -19,6 +19,7 @@
 //!   placed at the crossing so the corner is exact.
 //! - Walls: planar strips zipped between the top and bottom boundary polylines.
 
+use crate::check::{triangle_altitude, MIN_ALTITUDE_MM};
 use crate::design::Design;
 use crate::error::{KernelError, Result};
 use crate::mesh::Mesh;
@@ -39,6 +40,11 @@ const ALONG_SHARE: f64 = 0.4;
 const INTERIOR_ROW_RESIDUAL_MM: f64 = 1e-6;
 /// Cells of the curvature survey along y.
 const SURVEY_CELLS: usize = 256;
+/// A wall triangle thinner than this (mm) is avoided where the zip has a
+/// thicker choice: four times [`MIN_ALTITUDE_MM`], as the mold halves the
+/// wall's rungs at mid-height and fans to those points at an angle (the
+/// same margin as [`WALL_SNAP_MM`]).
+const WALL_SLIVER_MM: f64 = 4.0 * MIN_ALTITUDE_MM;
 
 /// Where a vertex comes from: its exact surface and parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -213,7 +219,12 @@ fn rows_from_curvature(lo: f64, hi: f64, k: &[f64], e: f64, min_segments: usize)
 /// other wavy, the nearer-vertex rule can fan a sparse vertex over a steep
 /// stretch of the wavy edge that faces away from it: triangles folded over
 /// their neighbours, the wall overlapping itself in its plane. There the
-/// other advance is taken when its triangle faces out.
+/// other advance is taken when its triangle faces out. Likewise where the
+/// wavy edge has two vertices very close together (a base row placed where
+/// a crease crosses the *other* wall, just inside a boundary row), a far
+/// sparse vertex fanned over them makes a sliver thinner than
+/// [`WALL_SLIVER_MM`]; the other advance is taken when its triangle is
+/// thicker and faces out.
 fn zip(
     a: &[u32],
     b: &[u32],
@@ -228,6 +239,12 @@ fn zip(
         facing.is_none_or(|(pos, outward)| {
             let [p, q, r] = oriented(t).map(|v| pos[v as usize]);
             (q - p).cross(r - p).dot(outward) > 0.0
+        })
+    };
+    // a lens strip's rows are far apart: only walls can fan into slivers
+    let thickness = |t: [u32; 3]| {
+        facing.map_or(f64::INFINITY, |(pos, _)| {
+            triangle_altitude(t.map(|v| pos[v as usize]))
         })
     };
     let (mut i, mut j) = (0, 0);
@@ -245,7 +262,10 @@ fn zip(
             } else {
                 (along_b, along_a)
             };
-            nearer != (!faces_out(preferred) && faces_out(other))
+            let folds = !faces_out(preferred);
+            let sliver =
+                thickness(preferred) < WALL_SLIVER_MM && thickness(other) > thickness(preferred);
+            nearer != ((folds || sliver) && faces_out(other))
         };
         let tri = if advance_a {
             i += 1;

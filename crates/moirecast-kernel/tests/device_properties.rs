@@ -230,6 +230,47 @@ fn a_sparse_wall_edge_over_a_rippled_one_does_not_fold() {
     assert_eq!(measure::walls_face_out(&folded).value, 1.0);
 }
 
+/// A regression (CI's random seed, 2026-12-03): on a sphere, a base crease
+/// crosses the right wall 7.5e-5 mm inside the back boundary row, and the
+/// row placed there reaches the left wall too. The left wall's revealer edge
+/// has three vertices; the zip fanned the middle one (2.56 mm away) over the
+/// two close base vertices: a wall triangle 9.9e-6 mm thin.
+#[test]
+fn a_crossing_row_beside_a_boundary_row_makes_no_wall_sliver() {
+    let mut p = DesignParams::with_defaults(
+        PitchSurface::Sphere {
+            radius: 370.01361013628014,
+        },
+        2.0028803587655544,
+        5.121483013164129,
+        0.2503600448456943,
+    );
+    p.lens.afov = 1.7899043862175865;
+    p.lens.index = 2.6951705182651806;
+    p.base.levels = 1.089985230218842;
+    p.profile = Profile::Ramp {
+        angle: 1.5422848267302276,
+        length: 6.225622547186199,
+    };
+    p.tolerance = 0.012758894034756644;
+    let d = Design::new(p).unwrap();
+    let dm = mesh_device(&d, &Silent).unwrap();
+    assert_eq!(dm.stats.crossing_rows, 1, "the case keeps its crossing row");
+    assert_device_invariants(&d, &dm);
+    let thinnest_wall = dm
+        .mesh
+        .triangles
+        .iter()
+        .zip(&dm.patches)
+        .filter(|(_, p)| matches!(p, mesher::Patch::Wall(_)))
+        .map(|(t, _)| check::triangle_altitude(t.map(|v| dm.mesh.positions[v as usize])))
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        thinnest_wall > 4.0 * check::MIN_ALTITUDE_MM,
+        "{thinnest_wall}"
+    );
+}
+
 proptest! {
     #![proptest_config(moirecast_kernel::strategies::config(48))]
 
