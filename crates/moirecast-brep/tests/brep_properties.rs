@@ -30,6 +30,7 @@ proptest! {
         prop_assert!(s.max_surface_deviation_mm <= d.tolerance.mm(), "{:?}", s);
         let text = step_text(&brep.solid, "device.step", "property test");
         prop_assert_eq!(read_back_faces(&text).unwrap(), vec![s.faces]);
+        assert_truck_stepio_data(&text, std::slice::from_ref(&brep.solid))?;
     }
 }
 
@@ -73,6 +74,31 @@ fn assert_printed_brep(
     let black = moirecast_brep::step_text_of(&brep.bands, "device-black.step", "property test");
     let faces = read_back_faces(&black).unwrap();
     prop_assert_eq!(faces.iter().sum::<usize>(), s.black_faces);
+    assert_truck_stepio_data(&clear, std::slice::from_ref(&brep.clear))?;
+    assert_truck_stepio_data(&black, &brep.bands)
+}
+
+/// Our STEP text (written in parallel) holds truck-stepio's serial text of
+/// `solids` byte for byte, from `DATA;` on, under the same schema.
+fn assert_truck_stepio_data(
+    text: &str,
+    solids: &[truck_modeling::Solid],
+) -> Result<(), TestCaseError> {
+    use truck_stepio::out::{CompleteStepDisplay, StepHeaderDescriptor, StepModels};
+    let compressed: Vec<_> = solids.iter().map(|s| s.compress()).collect();
+    let serial = CompleteStepDisplay::new(
+        compressed.iter().collect::<StepModels<_, _, _>>(),
+        StepHeaderDescriptor::default(),
+    )
+    .to_string();
+    let data = |t: &str| t.find("DATA;\n").map(|i| t[i..].to_owned());
+    let schema = |t: &str| {
+        t.lines()
+            .find(|l| l.starts_with("FILE_SCHEMA("))
+            .map(str::to_owned)
+    };
+    prop_assert!(data(text).is_some() && data(text) == data(&serial));
+    prop_assert_eq!(schema(text), schema(&serial));
     Ok(())
 }
 
