@@ -5,13 +5,19 @@
 //! serially; nearly all of the text is the control points of the surfaces
 //! and curves. So the layout pass writes a marker in place of each of them
 //! and records its index, and their text, truck-stepio's own, is then
-//! written in parallel and spliced in: the same bytes, on every core.
+//! written in parallel and spliced in: the same bytes, on every core. The
+//! B-spline kinds (all but a few planes) are written here, the same bytes
+//! again, with zmij's floats in place of `core::fmt`'s: most of the text
+//! is numbers.
 
 use crate::error::BrepError;
 use rayon::prelude::*;
 use std::cell::RefCell;
 use std::fmt::{self, Formatter, Write};
-use truck_modeling::{Curve, Point3, Solid, Surface};
+use truck_modeling::Homogeneous;
+use truck_modeling::{
+    BSplineCurve, Curve, KnotVec, NurbsCurve, NurbsSurface, Point3, Solid, Surface, Vector4,
+};
 use truck_stepio::out::{
     DisplayByStep, StepCurve, StepDisplay, StepLength, StepModels, StepSurface,
 };
@@ -47,10 +53,7 @@ pub fn step_text_of(solids: &[Solid], file_name: &str, description: &str) -> Str
     let queue = queue.take();
     let texts: Vec<String> = queue
         .par_iter()
-        .map(|&(idx, geometry)| match geometry {
-            Geometry::Curve(c) => StepDisplay::new(c, idx).to_string(),
-            Geometry::Surface(s) => StepDisplay::new(s, idx).to_string(),
-        })
+        .map(|&(idx, geometry)| geometry_text(geometry, idx))
         .collect();
     let header = header(file_name, description);
     const FOOTER: &str = "ENDSEC;\nEND-ISO-10303-21;\n";
@@ -80,6 +83,173 @@ fn header(file_name: &str, description: &str) -> String {
         STEP_TIMESTAMP,
         env!("CARGO_PKG_VERSION"),
     )
+}
+
+/// The text of one curve or surface whose first entity is `idx`:
+/// truck-stepio's, byte for byte.
+fn geometry_text(geometry: Geometry, idx: usize) -> String {
+    let mut w = Writer::default();
+    match geometry {
+        Geometry::Surface(Surface::NurbsSurface(s)) => w.nurbs_surface(s, idx),
+        Geometry::Curve(Curve::BSplineCurve(c)) => w.bspline_curve(c, idx),
+        Geometry::Curve(Curve::NurbsCurve(c)) => w.nurbs_curve(c, idx),
+        Geometry::Curve(c) => return StepDisplay::new(c, idx).to_string(),
+        Geometry::Surface(s) => return StepDisplay::new(s, idx).to_string(),
+    }
+    w.text
+}
+
+/// STEP text in truck-stepio's layout, with fast floats.
+#[derive(Default)]
+struct Writer {
+    text: String,
+    floats: zmij::Buffer,
+}
+
+impl Writer {
+    fn str(&mut self, s: &str) {
+        self.text.push_str(s);
+    }
+
+    fn index(&mut self, idx: usize) {
+        self.text.push('#');
+        self.usize(idx);
+    }
+
+    fn usize(&mut self, n: usize) {
+        write!(self.text, "{n}").expect("writing to a String");
+    }
+
+    /// truck-stepio's `FloatDisplay`: `{:.10E}` below 0.01, else `{:?}`,
+    /// the shortest digits that read back as `x`. zmij writes the same
+    /// between 0.01 and 1e15 but where two such strings of 17 digits are
+    /// equally near `x`: it rounds that tie to even, `core::fmt` up (both
+    /// read back as `x`; property tests).
+    fn float(&mut self, x: f64) {
+        let a = x.abs();
+        if a < 1e-2 && x != 0.0 {
+            write!(self.text, "{x:.10E}").expect("writing to a String");
+        } else if (1e-2..1e15).contains(&a) {
+            self.text.push_str(self.floats.format_finite(x));
+        } else {
+            write!(self.text, "{x:?}").expect("writing to a String");
+        }
+    }
+
+    /// `(a, b, …)` of `items`, each written by `each`.
+    fn list<T: Copy>(&mut self, items: &[T], mut each: impl FnMut(&mut Self, T)) {
+        self.text.push('(');
+        for (i, &x) in items.iter().enumerate() {
+            if i != 0 {
+                self.text.push_str(", ");
+            }
+            each(self, x);
+        }
+        self.text.push(')');
+    }
+
+    fn floats(&mut self, xs: &[f64]) {
+        self.list(xs, Self::float);
+    }
+
+    fn usizes(&mut self, ns: &[usize]) {
+        self.list(ns, Self::usize);
+    }
+
+    /// `(#first, …, #first + count − 1)`
+    fn indices(&mut self, first: usize, count: usize) {
+        let all: Vec<usize> = (first..first + count).collect();
+        self.list(&all, Self::index);
+    }
+
+    fn point(&mut self, p: Point3, idx: usize) {
+        self.index(idx);
+        self.str(" = CARTESIAN_POINT('', ");
+        self.floats(&[p.x, p.y, p.z]);
+        self.str(");\n");
+    }
+
+    fn knots(&mut self, knots: &KnotVec) {
+        let (single, multi) = knots.to_single_multi();
+        self.usizes(&multi);
+        self.str(", ");
+        self.floats(&single);
+    }
+
+    fn bspline_curve(&mut self, c: &BSplineCurve<Point3>, idx: usize) {
+        let n = c.control_points().len();
+        self.index(idx);
+        self.str(" = B_SPLINE_CURVE_WITH_KNOTS('', ");
+        self.usize(c.degree());
+        self.str(", ");
+        self.indices(idx + 1, n);
+        self.str(", .UNSPECIFIED., .U., .U., ");
+        self.knots(c.knot_vec());
+        self.str(", .UNSPECIFIED.);\n");
+        for (i, p) in c.control_points().iter().enumerate() {
+            self.point(*p, idx + 1 + i);
+        }
+    }
+
+    fn nurbs_curve(&mut self, c: &NurbsCurve<Vector4>, idx: usize) {
+        let n = c.control_points().len();
+        self.index(idx);
+        self.str(" = (\n    BOUNDED_CURVE()\n    B_SPLINE_CURVE(");
+        self.usize(c.degree());
+        self.str(", ");
+        self.indices(idx + 1, n);
+        self.str(", .UNSPECIFIED., .U., .U.)\n    B_SPLINE_CURVE_WITH_KNOTS(");
+        self.knots(c.knot_vec());
+        self.str(", .UNSPECIFIED.)\n    CURVE()\n    GEOMETRIC_REPRESENTATION_ITEM()\n    RATIONAL_B_SPLINE_CURVE(");
+        let weights: Vec<f64> = c.control_points().iter().map(|v| v.weight()).collect();
+        self.floats(&weights);
+        self.str(")\n    REPRESENTATION_ITEM('')\n);\n");
+        for (i, v) in c.control_points().iter().enumerate() {
+            self.point(v.to_point(), idx + 1 + i);
+        }
+    }
+
+    fn nurbs_surface(&mut self, s: &NurbsSurface<Vector4>, idx: usize) {
+        let rows = s.control_points();
+        self.index(idx);
+        self.str(" = (\n    BOUNDED_SURFACE()\n    B_SPLINE_SURFACE(");
+        self.usize(s.udegree());
+        self.str(", ");
+        self.usize(s.vdegree());
+        self.str(", ");
+        let mut first = idx + 1;
+        let starts: Vec<(usize, usize)> = rows
+            .iter()
+            .map(|row| {
+                first += row.len();
+                (first - row.len(), row.len())
+            })
+            .collect();
+        self.list(&starts, |w, (first, count)| w.indices(first, count));
+        self.str(", .UNSPECIFIED., .U., .U., .U.)\n    B_SPLINE_SURFACE_WITH_KNOTS(");
+        let (uknots, umulti) = s.uknot_vec().to_single_multi();
+        let (vknots, vmulti) = s.vknot_vec().to_single_multi();
+        self.usizes(&umulti);
+        self.str(", ");
+        self.usizes(&vmulti);
+        self.str(", ");
+        self.floats(&uknots);
+        self.str(", ");
+        self.floats(&vknots);
+        self.str(
+            ", .UNSPECIFIED.)\n    GEOMETRIC_REPRESENTATION_ITEM()\n    RATIONAL_B_SPLINE_SURFACE(",
+        );
+        let weights: Vec<Vec<f64>> = rows
+            .iter()
+            .map(|row| row.iter().map(|v| v.weight()).collect())
+            .collect();
+        let weights: Vec<&[f64]> = weights.iter().map(Vec::as_slice).collect();
+        self.list(&weights, Self::floats);
+        self.str(")\n    REPRESENTATION_ITEM('')\n    SURFACE()\n);\n");
+        for (i, v) in rows.iter().flatten().enumerate() {
+            self.point(v.to_point(), idx + 1 + i);
+        }
+    }
 }
 
 /// A curve or surface of the solid.
@@ -182,4 +352,74 @@ pub fn read_back_faces(text: &str) -> Result<Vec<usize>, BrepError> {
                 .map_err(|e| BrepError::StepRoundTrip(format!("shell #{id}: {e}")))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn written(x: f64) -> String {
+        let mut w = Writer::default();
+        w.float(x);
+        w.text
+    }
+
+    /// truck-stepio's `FloatDisplay`, spelled out.
+    fn truck_stepio(x: f64) -> String {
+        if x.abs() < 1e-2 && x != 0.0 {
+            format!("{x:.10E}")
+        } else {
+            format!("{x:?}")
+        }
+    }
+
+    #[test]
+    fn floats_at_the_edges_read_as_truck_stepio_writes_them() {
+        for x in [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.01,
+            -0.01,
+            0.009999999999999998,
+            1e15,
+            9.999999999999998e14,
+            1e16,
+            123456789.0,
+            0.1,
+            0.3,
+            2.0 / 3.0,
+            f64::MAX,
+            f64::MIN_POSITIVE,
+        ] {
+            assert_eq!(written(x), truck_stepio(x), "{x:e}");
+        }
+    }
+
+    proptest! {
+        #![proptest_config(moirecast_kernel::strategies::config(4096))]
+        #[test]
+        fn any_float_reads_back_with_as_many_digits_as_truck_stepio_writes(
+            x in prop_oneof![
+                (-3.0..16.0f64, any::<bool>()).prop_map(|(e, neg)| if neg { -(10f64.powf(e)) } else { 10f64.powf(e) }),
+                any::<f64>().prop_filter("finite", |x| x.is_finite()),
+                (-1e6..1e6f64),
+            ]
+        ) {
+            let (ours, theirs) = (written(x), truck_stepio(x));
+            if !(1e-2..1e15).contains(&x.abs()) {
+                // core::fmt's own text (truck-stepio keeps 10 digits below 0.01)
+                prop_assert_eq!(ours, theirs);
+                return Ok(());
+            }
+            prop_assert_eq!(ours.parse::<f64>().unwrap(), x);
+            prop_assert_eq!(ours.len(), theirs.len());
+            if ours != theirs {
+                // a tie, rounded to even: the last digits differ by one
+                prop_assert_eq!(&ours[..ours.len() - 1], &theirs[..theirs.len() - 1]);
+            }
+        }
+    }
 }
