@@ -24,7 +24,7 @@ use moirecast_kernel::model::BaseSection;
 use moirecast_kernel::{BaseKind, Design};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
-use truck_modeling::{BSplineSurface, KnotVec, NurbsSurface, Point3, Vector4};
+use truck_modeling::{BSplineSurface, KnotVec, NurbsSurface, Vector4};
 
 /// Homogeneous control points of one section: [P0, w·Pm, P1].
 type Section = [[f64; 4]; 3];
@@ -144,14 +144,17 @@ impl LensFamily {
             let surfaces = surfaces_of(lenses, &stations, &sections);
             let mids: Vec<f64> = stations.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
             let arcs = exact.arcs_at(lenses, &mids)?;
+            let knots = clamped_knots(&stations);
             let failing: Vec<bool> = (0..mids.len())
                 .into_par_iter()
                 .map(|s| {
+                    let along = Along::at(&knots, mids[s]);
                     lenses.iter().enumerate().any(|(l, k)| {
                         let arc = &arcs[l][s];
+                        let section = along.section(&surfaces[k]);
                         REFINE_T
                             .iter()
-                            .any(|&t| arc.distance(t, glam_of(surfaces[k].subs(t, mids[s]))) > fit)
+                            .any(|&t| arc.distance(t, section.point(t)) > fit)
                     })
                 })
                 .collect();
@@ -172,12 +175,20 @@ impl LensFamily {
                 }
             }
             refined.push(*stations.last().expect("two or more stations"));
-            // sections of the new stations only
+            // the new stations are the failing mids, whose exact sections are at hand
             let new: Vec<f64> = (0..mids.len())
                 .filter(|&s| failing[s])
                 .map(|s| mids[s])
                 .collect();
-            let new_sections = exact.at(lenses, &new)?;
+            let new_sections: Vec<Vec<Section>> = arcs
+                .iter()
+                .map(|per_mid| {
+                    (0..mids.len())
+                        .filter(|&s| failing[s])
+                        .map(|s| per_mid[s].section())
+                        .collect()
+                })
+                .collect();
             sections = merge_sections(&stations, &sections, &new, &new_sections, &refined);
             stations = refined;
         }
@@ -201,8 +212,59 @@ pub fn worst_deviation(families: &[(&LensFamily, &str)]) -> (f64, String) {
         .fold((0.0, String::new()), |a, b| if b.0 > a.0 { b } else { a })
 }
 
-fn glam_of(p: Point3) -> glam::DVec3 {
-    glam::DVec3::new(p.x, p.y, p.z)
+/// The cubic basis along the lenses at one station v, which every lens of a
+/// family shares (their stations, hence knots, are the same): a lens's
+/// section there costs four control points per row, not a basis per point.
+struct Along {
+    /// The first control point with a nonzero weight.
+    first: usize,
+    weights: [f64; 4],
+}
+
+impl Along {
+    fn at(knots: &KnotVec, v: f64) -> Along {
+        let basis = knots
+            .try_bspline_basis_functions(3, v)
+            .expect("v lies within the stations");
+        let first = basis
+            .iter()
+            .position(|&b| b != 0.0)
+            .unwrap_or(0)
+            .min(basis.len().saturating_sub(4));
+        let mut weights = [0.0; 4];
+        for (w, b) in weights.iter_mut().zip(&basis[first..]) {
+            *w = *b;
+        }
+        debug_assert!(basis
+            .iter()
+            .enumerate()
+            .all(|(i, &b)| b == 0.0 || (first..first + 4).contains(&i)));
+        Along { first, weights }
+    }
+
+    /// The homogeneous section of `surface` at this station.
+    fn section(&self, surface: &NurbsSurface<Vector4>) -> Across {
+        let rows = surface.control_points();
+        Across(std::array::from_fn(|r| {
+            self.weights
+                .iter()
+                .zip(&rows[r][self.first..])
+                .fold(Vector4::new(0.0, 0.0, 0.0, 0.0), |acc, (w, c)| {
+                    acc + *c * *w
+                })
+        }))
+    }
+}
+
+/// A lens surface's rational quadratic across, at one station.
+struct Across([Vector4; 3]);
+
+impl Across {
+    fn point(&self, t: f64) -> DVec3 {
+        let s = 1.0 - t;
+        let h = self.0[0] * (s * s) + self.0[1] * (2.0 * s * t) + self.0[2] * (t * t);
+        DVec3::new(h.x / h.w, h.y / h.w, h.z / h.w)
+    }
 }
 
 /// The exact sections of one array, with base creases computed once per
@@ -346,14 +408,17 @@ fn verify(
         .flat_map(|w| VERIFY_S.map(|s| w[0] + s * (w[1] - w[0])))
         .collect();
     let arcs = exact.arcs_at(lenses, &sample_v)?;
+    let knots = clamped_knots(stations);
+    let along: Vec<Along> = sample_v.iter().map(|&v| Along::at(&knots, v)).collect();
     let worst = lenses
         .par_iter()
         .enumerate()
         .map(|(l, &k)| {
             let mut worst = (0.0f64, k, 0.0, 0.0);
             for (s, &v) in sample_v.iter().enumerate() {
+                let section = along[s].section(&surfaces[&k]);
                 for t in VERIFY_T {
-                    let d = arcs[l][s].distance(t, glam_of(surfaces[&k].subs(t, v)));
+                    let d = arcs[l][s].distance(t, section.point(t));
                     if d > worst.0 {
                         worst = (d, k, t, v);
                     }
