@@ -97,7 +97,7 @@ pub fn build_device_checked(
     checks.push(measure::walls_on_outline(design, &mesh));
     checks.push(measure::walls_face_out(&mesh));
     checks.push(measure::creases_shared(design, &mesh));
-    checks.push(measure::base_creases_follow_shift(design, &mesh));
+    checks.push(measure::base_creases_follow_shift(design, &mesh, v_stride));
     checks.push(measure::surfaces_are_graphs(&mesh));
     checks.push(measure::min_thickness(design, &mesh, v_stride));
     let lens_stats = measure::revealer_lens_stats(design, &mesh);

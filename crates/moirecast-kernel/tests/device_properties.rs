@@ -27,7 +27,7 @@ fn assert_device_invariants(d: &Design, dm: &DeviceMesh) {
         measure::walls_on_outline(d, dm),
         measure::walls_face_out(dm),
         measure::creases_shared(d, dm),
-        measure::base_creases_follow_shift(d, dm),
+        measure::base_creases_follow_shift(d, dm, 1),
         measure::surfaces_are_graphs(dm),
         measure::min_thickness(d, dm, 1),
     ];

@@ -30,7 +30,7 @@ fn assert_printed_invariants(d: &Design, duty_within: Option<f64>) {
         measure::surface_to_mesh(d, &dm, 1),
         measure::walls_on_outline(d, &dm),
         measure::walls_face_out(&dm),
-        measure::base_creases_follow_shift(d, &dm),
+        measure::base_creases_follow_shift(d, &dm, 1),
         measure::min_thickness(d, &dm, 1),
     ];
     for c in checks {
