@@ -345,20 +345,6 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
     }
     let mut on_s = EdgeMap::new(pos.len(), &s_tris);
     let repair = repair_wall_touches(design, pos, &mut s_tris, &mut on_s)?;
-    let mut clear = Body::new(pos, &pb);
-    let mut clear_on_band: Vec<bool> = Vec::new();
-    let mut black = Body::new(pos, &pb);
-    let mut slab = Body::new(pos, &pb);
-    // the revealer and the upper walls belong to the clear body and the slab
-    for (ti, t) in tris.iter().enumerate() {
-        let face = match dm.patches[ti] {
-            Patch::Lens(LensRef::Revealer(i)) => BodyFace::Revealer(i),
-            Patch::Wall(side) => BodyFace::Wall(side),
-            Patch::Lens(LensRef::Base(_)) => continue,
-        };
-        clear.triangle(*t, Layer::Top, false, face);
-        slab.triangle(*t, Layer::Top, false, face);
-    }
     // what a vertical quad below edge a→b of s lies on
     let band_side = |a: u32, b: u32| match (dm.origins[a as usize], dm.origins[b as usize]) {
         (VertexOrigin::BaseCrease { k: c, .. }, VertexOrigin::BaseCrease { k: d, .. })
@@ -371,76 +357,147 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
     let wall = |a: u32, b: u32| {
         BodyFace::Wall(wall_side(design, 0.5 * (pos[a as usize] + pos[b as usize])))
     };
+    let s_faces: Vec<SFace> = s_tris
+        .iter()
+        .zip(&s_index)
+        .map(|(&(t, is_black), &ti)| {
+            let Patch::Lens(LensRef::Base(k)) = dm.patches[ti] else {
+                unreachable!("s_tris holds base triangles only")
+            };
+            let across = std::array::from_fn(|e| on_s.get(t[(e + 1) % 3], t[e]));
+            SFace {
+                t,
+                is_black,
+                k,
+                across,
+            }
+        })
+        .collect();
+    let section = |k, layer| BodyFace::Section { k, layer };
+    let edges = |t: [u32; 3]| (0..3).map(move |e| (t[e], t[(e + 1) % 3]));
+    // the revealer and the upper walls belong to the clear body and the slab
+    let upper = |body: &mut Body| {
+        for (ti, t) in tris.iter().enumerate() {
+            let face = match dm.patches[ti] {
+                Patch::Lens(LensRef::Revealer(i)) => BodyFace::Revealer(i),
+                Patch::Wall(side) => BodyFace::Wall(side),
+                Patch::Lens(LensRef::Base(_)) => continue,
+            };
+            body.triangle(*t, Layer::Top, false, face);
+        }
+    };
+    // The three bodies are built side by side, each from the same walk over
+    // s, so each numbers its vertices in the same first-use order as one
+    // walk building all three would.
+    let build_clear = || {
+        let mut clear = Body::new(pos, &pb);
+        let mut on_band: Vec<bool> = Vec::new();
+        upper(&mut clear);
+        for &SFace {
+            t,
+            is_black,
+            k,
+            across,
+        } in &s_faces
+        {
+            // s faces down in the device mesh; the backing's bottom does too
+            clear.triangle(t, Layer::Bottom, false, section(k, Layer::Bottom));
+            if is_black {
+                mark(&clear, &mut on_band, false);
+                clear.triangle(t, Layer::Top, false, section(k, Layer::Top));
+                clear.triangle(t, Layer::BandBottom, true, section(k, Layer::BandBottom));
+                mark(&clear, &mut on_band, true);
+            }
+            for (edge, other) in edges(t).zip(across) {
+                match other {
+                    // interior edge of s: a band side where black meets clear
+                    Some(other) => {
+                        if is_black && !other {
+                            mark(&clear, &mut on_band, false);
+                            let side = band_side(edge.0, edge.1);
+                            clear.quad(edge, Layer::Top, Layer::BandBottom, true, side);
+                            mark(&clear, &mut on_band, true);
+                        }
+                    }
+                    // on the outline: the lower wall
+                    None => {
+                        let w = wall(edge.0, edge.1);
+                        if !is_black {
+                            clear.quad(edge, Layer::Top, Layer::BandBottom, false, w);
+                        }
+                        clear.quad(edge, Layer::BandBottom, Layer::Bottom, false, w);
+                    }
+                }
+            }
+        }
+        mark(&clear, &mut on_band, false);
+        (clear, on_band)
+    };
+    let build_black = || {
+        let mut black = Body::new(pos, &pb);
+        for &SFace {
+            t,
+            is_black,
+            k,
+            across,
+        } in s_faces.iter().filter(|f| f.is_black)
+        {
+            black.triangle(t, Layer::Top, true, section(k, Layer::Top));
+            black.triangle(t, Layer::BandBottom, false, section(k, Layer::BandBottom));
+            for (edge, other) in edges(t).zip(across) {
+                let face = match other {
+                    Some(true) => continue,
+                    Some(false) => band_side(edge.0, edge.1),
+                    None => wall(edge.0, edge.1),
+                };
+                debug_assert!(is_black);
+                black.quad(edge, Layer::Top, Layer::BandBottom, false, face);
+            }
+        }
+        black
+    };
+    let build_slab = || {
+        let mut slab = Body::new(pos, &pb);
+        upper(&mut slab);
+        for &SFace { t, k, across, .. } in &s_faces {
+            slab.triangle(t, Layer::Bottom, false, section(k, Layer::Bottom));
+            for (edge, other) in edges(t).zip(across) {
+                if other.is_none() {
+                    slab.quad(edge, Layer::Top, Layer::Bottom, false, wall(edge.0, edge.1));
+                }
+            }
+        }
+        slab
+    };
+    let ((clear, clear_on_band), (black, slab)) =
+        rayon::join(build_clear, || rayon::join(build_black, build_slab));
     let (mut layer_area, mut black_area) = (0.0, 0.0);
     // per period m: xy area of its band, of all of it, and whether it meets an x-wall
     let mut periods: std::collections::BTreeMap<i64, (f64, f64, bool)> = Default::default();
     let (xl, xr) = design.outline_x;
-    for ((t, is_black), &ti) in s_tris.iter().zip(&s_index) {
-        let is_black = *is_black;
-        let area = xy_area(pos, t);
-        let Patch::Lens(LensRef::Base(k)) = dm.patches[ti] else {
-            unreachable!("s_tris holds base triangles only")
-        };
-        let section = |layer| BodyFace::Section { k, layer };
+    for &SFace { t, is_black, k, .. } in &s_faces {
+        let area = xy_area(pos, &t);
         layer_area += area;
         let period = periods.entry(k.div_euclid(2)).or_default();
         period.1 += area;
         if is_black {
             period.0 += area;
+            black_area += area;
         }
         period.2 |= t.iter().any(|&v| {
             let x = pos[v as usize].x;
             (x - xl).abs() <= WALL_SNAP_MM || (x - xr).abs() <= WALL_SNAP_MM
         });
-        // s faces down in the device mesh; the backing's bottom does too
-        clear.triangle(*t, Layer::Bottom, false, section(Layer::Bottom));
-        slab.triangle(*t, Layer::Bottom, false, section(Layer::Bottom));
-        if is_black {
-            black_area += area;
-            mark(&clear, &mut clear_on_band, false);
-            clear.triangle(*t, Layer::Top, false, section(Layer::Top));
-            clear.triangle(*t, Layer::BandBottom, true, section(Layer::BandBottom));
-            mark(&clear, &mut clear_on_band, true);
-            black.triangle(*t, Layer::Top, true, section(Layer::Top));
-            black.triangle(*t, Layer::BandBottom, false, section(Layer::BandBottom));
-        }
-        for e in 0..3 {
-            let edge = (t[e], t[(e + 1) % 3]);
-            match on_s.get(edge.1, edge.0) {
-                // interior edge of s: a band side where black meets clear
-                Some(other) => {
-                    if is_black && !other {
-                        let side = band_side(edge.0, edge.1);
-                        black.quad(edge, Layer::Top, Layer::BandBottom, false, side);
-                        mark(&clear, &mut clear_on_band, false);
-                        clear.quad(edge, Layer::Top, Layer::BandBottom, true, side);
-                        mark(&clear, &mut clear_on_band, true);
-                    }
-                }
-                // on the outline: the lower wall
-                None => {
-                    let w = wall(edge.0, edge.1);
-                    slab.quad(edge, Layer::Top, Layer::Bottom, false, w);
-                    if is_black {
-                        black.quad(edge, Layer::Top, Layer::BandBottom, false, w);
-                    } else {
-                        clear.quad(edge, Layer::Top, Layer::BandBottom, false, w);
-                    }
-                    clear.quad(edge, Layer::BandBottom, Layer::Bottom, false, w);
-                }
-            }
-        }
     }
-    mark(&clear, &mut clear_on_band, false);
     let (bands, caps) = shells_and_caps(&black.mesh, &black.origin, &on_s);
     let clear_genus = caps.iter().map(|&c| c.saturating_sub(1)).sum();
     let whole = periods.values().filter(|p| !p.2);
     let (black_area_whole, layer_area_whole) =
         whole.fold((0.0, 0.0), |(b, l), p| (b + p.0, l + p.1));
     Ok(PrintedBodies {
-        clear_faces: std::mem::take(&mut clear.faces),
-        black_faces: std::mem::take(&mut black.faces),
-        clear_vertices: std::mem::take(&mut clear.origin),
+        clear_faces: clear.faces,
+        black_faces: black.faces,
+        clear_vertices: clear.origin,
         black_vertices: black.origin,
         clear: clear.mesh,
         clear_on_band,
@@ -454,6 +511,16 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
         layer_area_whole,
         black_area_whole,
     })
+}
+
+/// A triangle of s with its section and, per edge a→b, the colour of the
+/// triangle across it (None on the outline).
+#[derive(Clone, Copy)]
+struct SFace {
+    t: [u32; 3],
+    is_black: bool,
+    k: i64,
+    across: [Option<bool>; 3],
 }
 
 /// Directed edges a→b of a triangle set, each with a value, looked up by
