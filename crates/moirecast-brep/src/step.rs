@@ -99,6 +99,20 @@ fn geometry_text(geometry: Geometry, idx: usize) -> String {
     w.text
 }
 
+/// truck-stepio's text around a B-spline curve's degree, point list and
+/// knots (see [`Writer::curve_head`]).
+const BSPLINE_CURVE: [&str; 3] = [
+    " = B_SPLINE_CURVE_WITH_KNOTS('', ",
+    ", .UNSPECIFIED., .U., .U., ",
+    ", .UNSPECIFIED.);\n",
+];
+/// The same for a rational curve, up to its weights.
+const NURBS_CURVE: [&str; 3] = [
+    " = (\n    BOUNDED_CURVE()\n    B_SPLINE_CURVE(",
+    ", .UNSPECIFIED., .U., .U.)\n    B_SPLINE_CURVE_WITH_KNOTS(",
+    ", .UNSPECIFIED.)\n    CURVE()\n    GEOMETRIC_REPRESENTATION_ITEM()\n    RATIONAL_B_SPLINE_CURVE(",
+];
+
 /// STEP text in truck-stepio's layout, with fast floats.
 #[derive(Default)]
 struct Writer {
@@ -176,37 +190,45 @@ impl Writer {
         self.floats(&single);
     }
 
-    fn bspline_curve(&mut self, c: &BSplineCurve<Point3>, idx: usize) {
-        let n = c.control_points().len();
+    /// `#idx = …` of a curve of `degree` over control points idx + 1 …
+    /// idx + n: `open`, the degree, the point list, `middle`, the knots,
+    /// `close`.
+    fn curve_head(
+        &mut self,
+        idx: usize,
+        (degree, n, knots): (usize, usize, &KnotVec),
+        [open, middle, close]: [&str; 3],
+    ) {
         self.index(idx);
-        self.str(" = B_SPLINE_CURVE_WITH_KNOTS('', ");
-        self.usize(c.degree());
+        self.str(open);
+        self.usize(degree);
         self.str(", ");
         self.indices(idx + 1, n);
-        self.str(", .UNSPECIFIED., .U., .U., ");
-        self.knots(c.knot_vec());
-        self.str(", .UNSPECIFIED.);\n");
-        for (i, p) in c.control_points().iter().enumerate() {
-            self.point(*p, idx + 1 + i);
+        self.str(middle);
+        self.knots(knots);
+        self.str(close);
+    }
+
+    /// The control points' entities, numbered from `first`.
+    fn points(&mut self, points: impl Iterator<Item = Point3>, first: usize) {
+        for (i, p) in points.enumerate() {
+            self.point(p, first + i);
         }
     }
 
+    fn bspline_curve(&mut self, c: &BSplineCurve<Point3>, idx: usize) {
+        let shape = (c.degree(), c.control_points().len(), c.knot_vec());
+        self.curve_head(idx, shape, BSPLINE_CURVE);
+        self.points(c.control_points().iter().copied(), idx + 1);
+    }
+
     fn nurbs_curve(&mut self, c: &NurbsCurve<Vector4>, idx: usize) {
-        let n = c.control_points().len();
-        self.index(idx);
-        self.str(" = (\n    BOUNDED_CURVE()\n    B_SPLINE_CURVE(");
-        self.usize(c.degree());
-        self.str(", ");
-        self.indices(idx + 1, n);
-        self.str(", .UNSPECIFIED., .U., .U.)\n    B_SPLINE_CURVE_WITH_KNOTS(");
-        self.knots(c.knot_vec());
-        self.str(", .UNSPECIFIED.)\n    CURVE()\n    GEOMETRIC_REPRESENTATION_ITEM()\n    RATIONAL_B_SPLINE_CURVE(");
+        let shape = (c.degree(), c.control_points().len(), c.knot_vec());
+        self.curve_head(idx, shape, NURBS_CURVE);
         let weights: Vec<f64> = c.control_points().iter().map(|v| v.weight()).collect();
         self.floats(&weights);
         self.str(")\n    REPRESENTATION_ITEM('')\n);\n");
-        for (i, v) in c.control_points().iter().enumerate() {
-            self.point(v.to_point(), idx + 1 + i);
-        }
+        self.points(c.control_points().iter().map(|v| v.to_point()), idx + 1);
     }
 
     fn nurbs_surface(&mut self, s: &NurbsSurface<Vector4>, idx: usize) {
@@ -246,9 +268,7 @@ impl Writer {
         let weights: Vec<&[f64]> = weights.iter().map(Vec::as_slice).collect();
         self.list(&weights, Self::floats);
         self.str(")\n    REPRESENTATION_ITEM('')\n    SURFACE()\n);\n");
-        for (i, v) in rows.iter().flatten().enumerate() {
-            self.point(v.to_point(), idx + 1 + i);
-        }
+        self.points(rows.iter().flatten().map(|v| v.to_point()), idx + 1);
     }
 }
 
