@@ -134,18 +134,22 @@ pub struct DeviceMesh {
     pub revealer_columns: Vec<usize>,
     /// Columns per base lens (lenses entirely outside the outline included).
     pub base_columns: BTreeMap<i64, usize>,
+    /// Columns of the revealer lenses before lens i (i = 0..=n): where lens
+    /// i starts in a row, and the row's length less one.
+    revealer_starts: Vec<usize>,
 }
 
 impl DeviceMesh {
     /// Index of revealer vertex (row r, lens i, column j ∈ 0..=n_i).
     pub fn revealer_vertex(&self, r: usize, i: usize, j: usize) -> u32 {
-        let row_len = self.revealer_row_len();
-        let off: usize = self.revealer_columns[..i].iter().sum();
-        (r * row_len + off + j) as u32
+        (r * self.revealer_row_len() + self.revealer_starts[i] + j) as u32
     }
 
     fn revealer_row_len(&self) -> usize {
-        self.revealer_columns.iter().sum::<usize>() + 1
+        self.revealer_starts
+            .last()
+            .expect("one start per lens and one past")
+            + 1
     }
 }
 
@@ -746,6 +750,12 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
             .collect(),
         revealer_columns: rev_columns.clone(),
         base_columns: base_columns.clone(),
+        revealer_starts: std::iter::once(0)
+            .chain(rev_columns.iter().scan(0, |sum, &c| {
+                *sum += c;
+                Some(*sum)
+            }))
+            .collect(),
     };
     let mut tris = Vec::new();
     let mut patches = Vec::new();
