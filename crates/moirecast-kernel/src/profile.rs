@@ -387,13 +387,21 @@ fn gaussian_blur(values: &mut [f64], nx: usize, ny: usize, sigma_cells: f64) {
     // as a serial loop would, so the result does not depend on the threads
     use rayon::prelude::*;
     let mut tmp = vec![0.0; values.len()];
+    let r = radius as usize;
     tmp.par_chunks_mut(nx).enumerate().for_each(|(j, row)| {
         let src = &values[j * nx..(j + 1) * nx];
         for (i, out) in row.iter_mut().enumerate() {
             let mut acc = 0.0;
-            for (t, w) in kernel.iter().enumerate() {
-                let ii = (i as isize + t as isize - radius).clamp(0, nx as isize - 1) as usize;
-                acc += w * src[ii];
+            if i >= r && i + r < nx {
+                // away from the border: the taps are one slice (same order)
+                for (w, v) in kernel.iter().zip(&src[i - r..=i + r]) {
+                    acc += w * v;
+                }
+            } else {
+                for (t, w) in kernel.iter().enumerate() {
+                    let ii = (i as isize + t as isize - radius).clamp(0, nx as isize - 1) as usize;
+                    acc += w * src[ii];
+                }
             }
             *out = acc;
         }
