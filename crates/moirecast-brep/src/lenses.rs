@@ -21,7 +21,7 @@ use crate::spline::{clamped_knots, interpolate};
 use glam::DVec3;
 use moirecast_kernel::lens::LensArc;
 use moirecast_kernel::model::BaseSection;
-use moirecast_kernel::{BaseKind, Design};
+use moirecast_kernel::Design;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use truck_modeling::{BSplineSurface, KnotVec, NurbsSurface, Vector4};
@@ -308,17 +308,9 @@ impl ExactSections<'_> {
                         Ok(lenses
                             .iter()
                             .map(|&k| {
-                                let (u0, u1) = (creases[&k], creases[&(k + 1)]);
-                                match d.params.base.kind {
-                                    BaseKind::DualLens => {
-                                        ExactSection::Arc(d.base_arc_between(u0, u1, v))
-                                    }
-                                    BaseKind::Printed(_) => ExactSection::Span(BaseSection::Band {
-                                        design: d,
-                                        u0,
-                                        u1,
-                                        v,
-                                    }),
+                                match d.base_section_between(creases[&k], creases[&(k + 1)], v) {
+                                    BaseSection::Lens(arc) => ExactSection::Arc(arc),
+                                    band => ExactSection::Span(band),
                                 }
                             })
                             .collect())

@@ -448,20 +448,37 @@ impl<'a> Planner<'a> {
             (((y + hh) / (2.0 * hh) * SURVEY_CELLS as f64).floor() as isize)
                 .clamp(0, SURVEY_CELLS as isize - 1) as usize
         };
+        // every crease once per station (two lenses share it), each solve
+        // starting from the crease's last
+        let crease_u: Vec<Vec<f64>> = (k0..=k1)
+            .into_par_iter()
+            .map(|c| {
+                let mut near = None;
+                stations
+                    .iter()
+                    .map(|&v| {
+                        let u = d.base_crease_u_near(c, v, near)?;
+                        near = Some(u);
+                        Ok(u)
+                    })
+                    .collect()
+            })
+            .collect::<Result<_>>()?;
         let surveys: Vec<(i64, LensSurvey)> = (k0..k1)
             .into_par_iter()
             .map(|k| {
-                // consecutive stations: each crease solve starts from the last
-                let mut near = (None, None);
-                let mut arcs = Vec::with_capacity(stations.len());
-                for &v in &stations {
-                    let (arc, u0, u1) = d.base_section_and_creases(k, v, near)?;
-                    near = (Some(u0), Some(u1));
-                    arcs.push(arc);
-                }
-                Ok((k, self.survey_lens(&arcs, h)))
+                let (u0, u1) = (
+                    &crease_u[(k - k0) as usize],
+                    &crease_u[(k - k0 + 1) as usize],
+                );
+                let arcs: Vec<BaseSection> = stations
+                    .iter()
+                    .enumerate()
+                    .map(|(s, &v)| d.base_section_between(u0[s], u1[s], v))
+                    .collect();
+                (k, self.survey_lens(&arcs, h))
             })
-            .collect::<Result<_>>()?;
+            .collect();
         let mut columns = BTreeMap::new();
         let mut kcell = vec![0.0f64; SURVEY_CELLS];
         let mut creases = Vec::new();

@@ -182,7 +182,13 @@ impl Design {
             self.base_crease_u_near(k, v, near.0)?,
             self.base_crease_u_near(k + 1, v, near.1)?,
         );
-        let section = match self.params.base.kind {
+        Ok((self.base_section_between(u0, u1, v), u0, u1))
+    }
+
+    /// The base section (a lens or a band span) whose creases lie at layout
+    /// u0 and u1 (already solved) at station v.
+    pub fn base_section_between(&self, u0: f64, u1: f64, v: f64) -> BaseSection<'_> {
+        match self.params.base.kind {
             BaseKind::DualLens => BaseSection::Lens(self.base_arc_between(u0, u1, v)),
             BaseKind::Printed(_) => BaseSection::Band {
                 design: self,
@@ -190,8 +196,7 @@ impl Design {
                 u1,
                 v,
             },
-        };
-        Ok((section, u0, u1))
+        }
     }
 
     /// The base arc whose creases lie at layout u0 and u1 (already solved)
