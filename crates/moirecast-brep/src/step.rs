@@ -5,10 +5,11 @@
 //! serially; nearly all of the text is the control points of the surfaces
 //! and curves. So the layout pass writes a marker in place of each of them
 //! and records its index, and their text, truck-stepio's own, is then
-//! written in parallel and spliced in: the same bytes, on every core. The
-//! B-spline kinds (all but a few planes) are written here, the same bytes
-//! again, with zmij's floats in place of `core::fmt`'s: most of the text
-//! is numbers.
+//! written in parallel and spliced in, on every core. The B-spline kinds
+//! (all but a few planes) are written here in truck-stepio's form with
+//! zmij's floats in place of `core::fmt`'s (most of the text is numbers):
+//! the same text, but where a 17-digit tie rounds to even (the same
+//! number; see `Writer::float`).
 
 use crate::error::BrepError;
 use rayon::prelude::*;
@@ -86,7 +87,7 @@ fn header(file_name: &str, description: &str) -> String {
 }
 
 /// The text of one curve or surface whose first entity is `idx`:
-/// truck-stepio's, byte for byte.
+/// truck-stepio's, with the same numbers.
 fn geometry_text(geometry: Geometry, idx: usize) -> String {
     let mut w = Writer::default();
     match geometry {
