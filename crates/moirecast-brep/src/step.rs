@@ -152,9 +152,9 @@ impl Writer {
     }
 
     /// `(a, b, …)` of `items`, each written by `each`.
-    fn list<T: Copy>(&mut self, items: &[T], mut each: impl FnMut(&mut Self, T)) {
+    fn list<T>(&mut self, items: impl IntoIterator<Item = T>, mut each: impl FnMut(&mut Self, T)) {
         self.text.push('(');
-        for (i, &x) in items.iter().enumerate() {
+        for (i, x) in items.into_iter().enumerate() {
             if i != 0 {
                 self.text.push_str(", ");
             }
@@ -163,24 +163,23 @@ impl Writer {
         self.text.push(')');
     }
 
-    fn floats(&mut self, xs: &[f64]) {
+    fn floats(&mut self, xs: impl IntoIterator<Item = f64>) {
         self.list(xs, Self::float);
     }
 
     fn usizes(&mut self, ns: &[usize]) {
-        self.list(ns, Self::usize);
+        self.list(ns.iter().copied(), Self::usize);
     }
 
     /// `(#first, …, #first + count − 1)`
     fn indices(&mut self, first: usize, count: usize) {
-        let all: Vec<usize> = (first..first + count).collect();
-        self.list(&all, Self::index);
+        self.list(first..first + count, Self::index);
     }
 
     fn point(&mut self, p: Point3, idx: usize) {
         self.index(idx);
         self.str(" = CARTESIAN_POINT('', ");
-        self.floats(&[p.x, p.y, p.z]);
+        self.floats([p.x, p.y, p.z]);
         self.str(");\n");
     }
 
@@ -188,7 +187,7 @@ impl Writer {
         let (single, multi) = knots.to_single_multi();
         self.usizes(&multi);
         self.str(", ");
-        self.floats(&single);
+        self.floats(single);
     }
 
     /// `#idx = …` of a curve of `degree` over control points idx + 1 …
@@ -226,8 +225,7 @@ impl Writer {
     fn nurbs_curve(&mut self, c: &NurbsCurve<Vector4>, idx: usize) {
         let shape = (c.degree(), c.control_points().len(), c.knot_vec());
         self.curve_head(idx, shape, NURBS_CURVE);
-        let weights: Vec<f64> = c.control_points().iter().map(|v| v.weight()).collect();
-        self.floats(&weights);
+        self.floats(c.control_points().iter().map(|v| v.weight()));
         self.str(")\n    REPRESENTATION_ITEM('')\n);\n");
         self.points(c.control_points().iter().map(|v| v.to_point()), idx + 1);
     }
@@ -241,14 +239,10 @@ impl Writer {
         self.usize(s.vdegree());
         self.str(", ");
         let mut first = idx + 1;
-        let starts: Vec<(usize, usize)> = rows
-            .iter()
-            .map(|row| {
-                first += row.len();
-                (first - row.len(), row.len())
-            })
-            .collect();
-        self.list(&starts, |w, (first, count)| w.indices(first, count));
+        self.list(rows, |w, row| {
+            w.indices(first, row.len());
+            first += row.len();
+        });
         self.str(", .UNSPECIFIED., .U., .U., .U.)\n    B_SPLINE_SURFACE_WITH_KNOTS(");
         let (uknots, umulti) = s.uknot_vec().to_single_multi();
         let (vknots, vmulti) = s.vknot_vec().to_single_multi();
@@ -256,18 +250,13 @@ impl Writer {
         self.str(", ");
         self.usizes(&vmulti);
         self.str(", ");
-        self.floats(&uknots);
+        self.floats(uknots);
         self.str(", ");
-        self.floats(&vknots);
+        self.floats(vknots);
         self.str(
             ", .UNSPECIFIED.)\n    GEOMETRIC_REPRESENTATION_ITEM()\n    RATIONAL_B_SPLINE_SURFACE(",
         );
-        let weights: Vec<Vec<f64>> = rows
-            .iter()
-            .map(|row| row.iter().map(|v| v.weight()).collect())
-            .collect();
-        let weights: Vec<&[f64]> = weights.iter().map(Vec::as_slice).collect();
-        self.list(&weights, Self::floats);
+        self.list(rows, |w, row| w.floats(row.iter().map(|v| v.weight())));
         self.str(")\n    REPRESENTATION_ITEM('')\n    SURFACE()\n);\n");
         self.points(rows.iter().flatten().map(|v| v.to_point()), idx + 1);
     }
