@@ -267,8 +267,8 @@ fn zip(
                 (along_b, along_a)
             };
             let folds = !faces_out(preferred);
-            let sliver =
-                thickness(preferred) < WALL_SLIVER_MM && thickness(other) > thickness(preferred);
+            let thin = thickness(preferred);
+            let sliver = thin < WALL_SLIVER_MM && thickness(other) > thin;
             nearer != ((folds || sliver) && faces_out(other))
         };
         let tri = if advance_a {
