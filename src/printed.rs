@@ -219,8 +219,7 @@ pub(crate) fn write_printed_device(
     let mut files = OutputSet::new();
     let mut reports = std::collections::BTreeMap::new();
     let stls = [("device-clear.stl", clear), ("device-black.stl", black)];
-    // the B-rep and STEP alongside the meshes' encodings (both STLs at
-    // once: stl_io writes one triangle at a time)
+    // the B-rep and STEP alongside the meshes' encodings
     let (step, ((clear_stl, black_stl), threemf)) = rayon::join(
         || moirecast_brep::printed_step(&spec.design, &build.mesh, b),
         || {
