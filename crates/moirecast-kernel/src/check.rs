@@ -318,12 +318,15 @@ fn f32_rounding_faults(mesh: &Mesh) -> (usize, usize) {
             (b - a).cross(c - a).dot((fb - fa).cross(fc - fa)) <= 0.0
         })
         .count();
-    let mut seen = std::collections::HashSet::with_capacity(mesh.positions.len());
-    let merged = mesh
+    // vertices beyond the first at each f32 point: sorted, the equal keys
+    // are neighbours (a parallel sort; hashing 300 k points took longer)
+    let mut keys: Vec<[u32; 3]> = mesh
         .positions
-        .iter()
-        .filter(|p| !seen.insert(p.as_vec3().to_array().map(|c| (c + 0.0).to_bits())))
-        .count();
+        .par_iter()
+        .map(|p| p.as_vec3().to_array().map(|c| (c + 0.0).to_bits()))
+        .collect();
+    keys.par_sort_unstable();
+    let merged = keys.windows(2).filter(|w| w[0] == w[1]).count();
     (flipped, merged)
 }
 
@@ -432,5 +435,27 @@ mod tests {
         assert!(solid_checks(&m)
             .iter()
             .any(|c| c.name == "no-degenerate-triangles" && !c.passed));
+    }
+
+    /// Vertices distinct in f64 but one point in f32 are counted once per
+    /// extra vertex; −0 and +0 are one point.
+    #[test]
+    fn vertices_that_meet_in_f32_are_counted() {
+        let mut m = tetra();
+        let distinct = |m: &Mesh| {
+            solid_checks_for(m, SolidSpec::boolean_result(0))
+                .into_iter()
+                .find(|c| c.name == "f32-distinct-vertices")
+                .unwrap()
+                .value
+        };
+        assert_eq!(distinct(&m), 0.0);
+        m.positions.extend([
+            DVec3::X * (1.0 + 1e-12),
+            DVec3::new(-0.0, 0.0, 0.0),
+            DVec3::Z * (1.0 - 1e-13),
+            DVec3::Y * 0.5,
+        ]);
+        assert_eq!(distinct(&m), 3.0);
     }
 }
