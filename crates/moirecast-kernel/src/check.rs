@@ -134,77 +134,33 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
         "vertices",
         format!("{} vertices", mesh.positions.len()),
     ));
-
-    // Closed and oriented: every directed edge a→b appears exactly once, and
-    // so does b→a. Outgoing edges per vertex in CSR form make this O(E).
-    let nv = mesh.positions.len();
-    let mut start = vec![0u32; nv + 1];
-    for t in &mesh.triangles {
-        for &a in t {
-            start[a as usize + 1] += 1;
-        }
-    }
-    for v in 0..nv {
-        start[v + 1] += start[v];
-    }
-    let mut fill = start.clone();
-    let mut out_edges = vec![0u32; 3 * mesh.triangles.len()];
-    for t in &mesh.triangles {
-        for e in 0..3 {
-            let a = t[e] as usize;
-            out_edges[fill[a] as usize] = t[(e + 1) % 3];
-            fill[a] += 1;
-        }
-    }
-    let out_of = |a: u32| &out_edges[start[a as usize] as usize..start[a as usize + 1] as usize];
-    let bad: usize = (0..nv as u32)
-        .into_par_iter()
-        .map(|a| {
-            out_of(a)
-                .iter()
-                .filter(|&&b| {
-                    out_of(a).iter().filter(|&&x| x == b).count() != 1
-                        || out_of(b).iter().filter(|&&x| x == a).count() != 1
-                })
-                .count()
-        })
-        .sum();
-    let directed = out_edges.len();
+    // the measurements are independent; the two serial ones (the edge
+    // index and the union-find) run beside the parallel ones
+    let (unmatched, ((shells, vertices), (volume, (min_alt, worst), f32_faults))) = rayon::join(
+        || unmatched_edges(mesh),
+        || {
+            rayon::join(
+                || shells_and_used_vertices(mesh),
+                || {
+                    let ((volume, altitude), f32_faults) = rayon::join(
+                        || rayon::join(|| mesh.volume(), || smallest_altitude(mesh)),
+                        || spec.f32_safe.then(|| f32_rounding_faults(mesh)),
+                    );
+                    (volume, altitude, f32_faults)
+                },
+            )
+        },
+    );
+    let directed = 3 * mesh.triangles.len();
     let undirected = directed / 2;
     out.push(CheckResult::at_most(
         "closed-oriented",
-        bad as f64,
+        unmatched as f64,
         0.0,
         "edges",
-        format!("{directed} directed edges; {bad} not matched by exactly one opposite edge"),
+        format!("{directed} directed edges; {unmatched} not matched by exactly one opposite edge"),
     ));
     // One shell, genus 0: connected, and V − E + F = 2.
-    let mut parent: Vec<u32> = (0..mesh.positions.len() as u32).collect();
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            p[x as usize] = p[p[x as usize] as usize];
-            x = p[x as usize];
-        }
-        x
-    }
-    for t in &mesh.triangles {
-        for e in 1..3 {
-            let (a, b) = (find(&mut parent, t[0]), find(&mut parent, t[e]));
-            if a != b {
-                parent[a as usize] = b;
-            }
-        }
-    }
-    let mut used = vec![false; mesh.positions.len()];
-    for t in &mesh.triangles {
-        for &v in t {
-            used[v as usize] = true;
-        }
-    }
-    let vertices = used.iter().filter(|&&u| u).count();
-    let shells = (0..mesh.positions.len() as u32)
-        .filter(|&v| used[v as usize] && find(&mut parent, v) == v)
-        .count();
     let euler = vertices as i64 - undirected as i64 + mesh.triangles.len() as i64;
     out.push(CheckResult {
         name: "shells",
@@ -228,7 +184,6 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
         detail: format!("Euler characteristic {euler}"),
     });
 
-    let volume = mesh.volume();
     out.push(CheckResult {
         name: "positive-volume",
         value: volume,
@@ -238,14 +193,12 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
         detail: String::new(),
     });
 
-    let (min_alt, worst) = smallest_altitude(mesh);
     let at = mesh
         .triangles
         .get(worst)
         .map(|t| mesh.positions[t[0] as usize])
         .unwrap_or_default();
-    if spec.f32_safe {
-        let (flipped, merged) = f32_rounding_faults(mesh);
+    if let Some((flipped, merged)) = f32_faults {
         out.push(CheckResult::at_most(
             "f32-safe-triangles",
             flipped as f64,
@@ -272,6 +225,76 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
         ),
     ));
     out
+}
+
+/// Directed edges of `mesh` not matched by exactly one opposite edge (with
+/// no twin of their own): 0 for a closed, consistently oriented mesh.
+/// Outgoing edges per vertex in CSR form make this O(E).
+fn unmatched_edges(mesh: &Mesh) -> usize {
+    let nv = mesh.positions.len();
+    let mut start = vec![0u32; nv + 1];
+    for t in &mesh.triangles {
+        for &a in t {
+            start[a as usize + 1] += 1;
+        }
+    }
+    for v in 0..nv {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut out_edges = vec![0u32; 3 * mesh.triangles.len()];
+    for t in &mesh.triangles {
+        for e in 0..3 {
+            let a = t[e] as usize;
+            out_edges[fill[a] as usize] = t[(e + 1) % 3];
+            fill[a] += 1;
+        }
+    }
+    let out_of = |a: u32| &out_edges[start[a as usize] as usize..start[a as usize + 1] as usize];
+    (0..nv as u32)
+        .into_par_iter()
+        .map(|a| {
+            out_of(a)
+                .iter()
+                .filter(|&&b| {
+                    out_of(a).iter().filter(|&&x| x == b).count() != 1
+                        || out_of(b).iter().filter(|&&x| x == a).count() != 1
+                })
+                .count()
+        })
+        .sum()
+}
+
+/// Connected shells of `mesh` (by shared vertices) and the vertices that
+/// some triangle uses.
+fn shells_and_used_vertices(mesh: &Mesh) -> (usize, usize) {
+    let mut parent: Vec<u32> = (0..mesh.positions.len() as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            p[x as usize] = p[p[x as usize] as usize];
+            x = p[x as usize];
+        }
+        x
+    }
+    for t in &mesh.triangles {
+        for e in 1..3 {
+            let (a, b) = (find(&mut parent, t[0]), find(&mut parent, t[e]));
+            if a != b {
+                parent[a as usize] = b;
+            }
+        }
+    }
+    let mut used = vec![false; mesh.positions.len()];
+    for t in &mesh.triangles {
+        for &v in t {
+            used[v as usize] = true;
+        }
+    }
+    let vertices = used.iter().filter(|&&u| u).count();
+    let shells = (0..mesh.positions.len() as u32)
+        .filter(|&v| used[v as usize] && find(&mut parent, v) == v)
+        .count();
+    (shells, vertices)
 }
 
 /// The smallest altitude (mm) of the triangle `[a, b, c]`: twice its area
