@@ -51,7 +51,7 @@ fn main() {
         let t4 = Instant::now();
         let bodies = printed_bodies(&spec.design, &build.mesh).unwrap();
         let t5 = Instant::now();
-        let printed = moirecast::printed::build_printed(&spec.design, &build).unwrap();
+        let printed = moirecast::printed::build_printed(&spec.design, &build.mesh).unwrap();
         let t6 = Instant::now();
         assert_eq!(bodies.bands, printed.report.bands);
         let (_, solids) = printed.solids();

@@ -84,6 +84,22 @@ pub fn build_device_checked(
 ) -> Result<DeviceBuild> {
     let mesh = mesh_device(design, progress).context("meshing the device")?;
     progress.stage("checking", 1);
+    let (lens_stats, checks) = measure_device(design, &mesh, thoroughness);
+    progress.tick(1);
+    Ok(DeviceBuild {
+        mesh,
+        lens_stats,
+        checks,
+    })
+}
+
+/// Measures the device mesh `mesh` against the exact model of `design`
+/// (METHOD §7.2–§7.3): the lens statistics and the checks, passed or not.
+pub fn measure_device(
+    design: &Design,
+    mesh: &DeviceMesh,
+    thoroughness: Thoroughness,
+) -> (measure::LensStats, Vec<CheckResult>) {
     let mut checks = Vec::new();
     let (v_stride, t_stride) = match thoroughness {
         Thoroughness::Full => (1, 1),
@@ -92,15 +108,15 @@ pub fn build_device_checked(
             (mesh.mesh.triangles.len() / REPORT_TRIANGLE_SAMPLES).max(1),
         ),
     };
-    checks.push(measure::vertex_on_surface(design, &mesh, v_stride));
-    checks.push(measure::surface_to_mesh(design, &mesh, t_stride));
-    checks.push(measure::walls_on_outline(design, &mesh));
-    checks.push(measure::walls_face_out(&mesh));
-    checks.push(measure::creases_shared(design, &mesh));
-    checks.push(measure::base_creases_follow_shift(design, &mesh, v_stride));
-    checks.push(measure::surfaces_are_graphs(&mesh));
-    checks.push(measure::min_thickness(design, &mesh, v_stride));
-    let lens_stats = measure::revealer_lens_stats(design, &mesh);
+    checks.push(measure::vertex_on_surface(design, mesh, v_stride));
+    checks.push(measure::surface_to_mesh(design, mesh, t_stride));
+    checks.push(measure::walls_on_outline(design, mesh));
+    checks.push(measure::walls_face_out(mesh));
+    checks.push(measure::creases_shared(design, mesh));
+    checks.push(measure::base_creases_follow_shift(design, mesh, v_stride));
+    checks.push(measure::surfaces_are_graphs(mesh));
+    checks.push(measure::min_thickness(design, mesh, v_stride));
+    let lens_stats = measure::revealer_lens_stats(design, mesh);
     checks.extend(afov_check(design, &lens_stats));
     checks.push(CheckResult::at_most(
         "arcs-are-circles",
@@ -109,12 +125,7 @@ pub fn build_device_checked(
         "mm",
         "largest distance of a station-row vertex from its lens circle".into(),
     ));
-    progress.tick(1);
-    Ok(DeviceBuild {
-        mesh,
-        lens_stats,
-        checks,
-    })
+    (lens_stats, checks)
 }
 
 /// What `moirecast device` wrote, for the summary it prints.
@@ -170,15 +181,16 @@ pub fn run_device(
     mesher: Mesher,
     progress: &dyn Progress,
 ) -> Result<DeviceOutcome> {
-    let build = build_device_checked(&spec.design, thoroughness, progress)?;
-    let (checks, solid) = build.validated();
-    refuse_failed(&checks)?;
     if let moirecast_kernel::BaseKind::Printed(_) = spec.design.params.base.kind {
         if mesher == Mesher::Brep {
             bail!("--mesher brep writes the truck-meshalgo tessellation of a dual-lens device's B-rep as its STL; a printed device's two bodies come from the direct mesher only (their B-rep is written as STEP); leave it out for a printed device");
         }
-        return printed::write_printed_device(spec, &build, checks, out, progress);
+        let mesh = mesh_device(&spec.design, progress).context("meshing the device")?;
+        return printed::write_printed_device(spec, mesh, thoroughness, out, progress);
     }
+    let build = build_device_checked(&spec.design, thoroughness, progress)?;
+    let (checks, solid) = build.validated();
+    refuse_failed(&checks)?;
     progress.stage("B-rep and STEP", 1);
     let step = moirecast_brep::device_step(&spec.design, &build.mesh, "device.step")
         .context("building the B-rep")?;

@@ -3,10 +3,13 @@
 //! before anything is written.
 
 use crate::report::{self, FileReport};
-use crate::{commit_with_report, refuse_failed, DeviceBuild, DeviceOutcome};
+use crate::{
+    commit_with_report, measure_device, refuse_failed, DeviceBuild, DeviceOutcome, Thoroughness,
+};
 use anyhow::{Context, Result};
 use moirecast_export::{stl_bytes, threemf_bytes, Material, Object, OutputSet};
 use moirecast_kernel::check::{CheckResult, SolidMesh, SolidSpec};
+use moirecast_kernel::mesher::DeviceMesh;
 use moirecast_kernel::printed::{duty_along_lines, printed_bodies, PrintedBodies};
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{BaseKind, Design, PrintedBase};
@@ -100,40 +103,44 @@ impl PrintedBuild {
     /// each) and the whole device, run once; the two bodies as solids if
     /// they all passed.
     pub fn solids(&self) -> (Vec<CheckResult>, Option<[SolidMesh<'_>; 2]>) {
-        let b = &self.bodies;
-        let spec = |genus, shells| SolidSpec {
-            genus,
-            shells,
-            ..SolidSpec::DEVICE
-        };
-        // the three meshes are checked at once, reported in this order
-        use rayon::prelude::*;
-        let results: Vec<_> = [
-            ("device-clear.stl", &b.clear, spec(b.clear_genus, 1)),
-            ("device-black.stl", &b.black, spec(0, b.bands)),
-            ("the whole device", &b.slab, spec(0, 1)),
-        ]
-        .into_par_iter()
-        .map(|(file, mesh, spec)| {
-            let (found, solid) = SolidMesh::validate_for(mesh, spec);
-            let found: Vec<CheckResult> = found
-                .into_iter()
-                .map(|mut c| {
-                    c.detail = format!("{file}: {}", c.detail);
-                    c
-                })
-                .collect();
-            (found, solid)
-        })
-        .collect();
-        let (checks, solids): (Vec<Vec<CheckResult>>, Vec<_>) = results.into_iter().unzip();
-        let checks = checks.concat();
-        let all = match solids[..] {
-            [Some(clear), Some(black), Some(_)] => Some([clear, black]),
-            _ => None,
-        };
-        (checks, all)
+        body_solids(&self.bodies)
     }
+}
+
+/// [`PrintedBuild::solids`] of `b`.
+fn body_solids(b: &PrintedBodies) -> (Vec<CheckResult>, Option<[SolidMesh<'_>; 2]>) {
+    let spec = |genus, shells| SolidSpec {
+        genus,
+        shells,
+        ..SolidSpec::DEVICE
+    };
+    // the three meshes are checked at once, reported in this order
+    use rayon::prelude::*;
+    let results: Vec<_> = [
+        ("device-clear.stl", &b.clear, spec(b.clear_genus, 1)),
+        ("device-black.stl", &b.black, spec(0, b.bands)),
+        ("the whole device", &b.slab, spec(0, 1)),
+    ]
+    .into_par_iter()
+    .map(|(file, mesh, spec)| {
+        let (found, solid) = SolidMesh::validate_for(mesh, spec);
+        let found: Vec<CheckResult> = found
+            .into_iter()
+            .map(|mut c| {
+                c.detail = format!("{file}: {}", c.detail);
+                c
+            })
+            .collect();
+        (found, solid)
+    })
+    .collect();
+    let (checks, solids): (Vec<Vec<CheckResult>>, Vec<_>) = results.into_iter().unzip();
+    let checks = checks.concat();
+    let all = match solids[..] {
+        [Some(clear), Some(black), Some(_)] => Some([clear, black]),
+        _ => None,
+    };
+    (checks, all)
 }
 
 fn printed_base(design: &Design) -> PrintedBase {
@@ -146,9 +153,24 @@ fn printed_base(design: &Design) -> PrintedBase {
 /// Builds the clear and black bodies from the checked device mesh and
 /// measures them: together exactly the device, and the duty cycle by
 /// volume and along lines.
-pub fn build_printed(design: &Design, build: &DeviceBuild) -> Result<PrintedBuild> {
+pub fn build_printed(design: &Design, mesh: &DeviceMesh) -> Result<PrintedBuild> {
+    let bodies = printed_bodies(design, mesh).context("building the printed bodies")?;
+    let (checks, report) = measure_printed(design, mesh, &bodies);
+    Ok(PrintedBuild {
+        bodies,
+        checks,
+        report,
+    })
+}
+
+/// What is measured of the bodies: the fill check (clear and black add up
+/// to the device) and the report's volumes and duty cycle.
+fn measure_printed(
+    design: &Design,
+    mesh: &DeviceMesh,
+    bodies: &PrintedBodies,
+) -> (Vec<CheckResult>, PrintedReport) {
     let pb = printed_base(design);
-    let bodies = printed_bodies(design, &build.mesh).context("building the printed bodies")?;
     let mut checks = Vec::new();
     let ((clear, black, slab), lines) = rayon::join(
         || {
@@ -158,7 +180,7 @@ pub fn build_printed(design: &Design, build: &DeviceBuild) -> Result<PrintedBuil
                 bodies.slab.volume(),
             )
         },
-        || duty_along_lines(design, &build.mesh, DUTY_LINES),
+        || duty_along_lines(design, mesh, DUTY_LINES),
     );
     checks.push(CheckResult::at_most(
         "bodies-fill-device",
@@ -190,75 +212,146 @@ pub fn build_printed(design: &Design, build: &DeviceBuild) -> Result<PrintedBuil
         wall_touch_shift_mm: bodies.wall_touches.max_shift_mm,
         brep: None,
     };
-    Ok(PrintedBuild {
-        bodies,
-        checks,
-        report,
-    })
+    (checks, report)
 }
 
-/// Writes `device-clear.stl`, `device-black.stl`, `device.3mf` and
-/// `report.json` for a printed design whose device mesh passed `checks`.
-pub(crate) fn write_printed_device(
-    spec: &Spec,
-    build: &DeviceBuild,
-    mut checks: Vec<CheckResult>,
-    out: &Path,
-    progress: &dyn Progress,
-) -> Result<DeviceOutcome> {
-    progress.stage("printed bodies", 1);
-    let printed = build_printed(&spec.design, build)?;
-    let (solid_checks, solids) = printed.solids();
-    checks.extend(solid_checks);
-    checks.extend(printed.checks.iter().cloned());
-    refuse_failed(&checks)?;
-    let [clear, black] = solids.context("the printed bodies passed their solid checks")?;
-    progress.tick(1);
-    progress.stage("B-rep, STEP and writing", 1);
-    let b = &printed.bodies;
-    let mut files = OutputSet::new();
-    let mut reports = std::collections::BTreeMap::new();
-    let stls = [("device-clear.stl", clear), ("device-black.stl", black)];
-    // the B-rep and STEP alongside the meshes' encodings
-    let (step, ((clear_stl, black_stl), threemf)) = rayon::join(
-        || moirecast_brep::printed_step(&spec.design, &build.mesh, b),
+/// The printed device's files, encoded, and what was checked of them.
+struct PrintedFiles {
+    bodies: PrintedBodies,
+    /// The bodies' solid checks and the fill check, passed or not.
+    checks: Vec<CheckResult>,
+    report: PrintedReport,
+    /// `device-clear.stl`, `device-black.stl` and `device.3mf`, if the
+    /// bodies passed their solid checks.
+    encoded: Option<Encoded>,
+    step: Result<moirecast_brep::PrintedStep>,
+}
+
+/// The two STLs (with their reports) and the 3MF.
+struct Encoded {
+    stls: [(&'static str, FileReport, Vec<u8>); 2],
+    threemf: Vec<u8>,
+}
+
+/// Builds the bodies from the device mesh `mesh` (solid, not yet
+/// measured), then side by side: their measurements; their solid checks
+/// and, if passed, their STLs and 3MF; their B-rep and STEP. The B-rep's
+/// lens and band surfaces are fitted while the bodies are built.
+fn printed_files(design: &Design, mesh: &DeviceMesh) -> Result<PrintedFiles> {
+    let (surfaces, bodies) = rayon::join(
+        || moirecast_brep::PrintedSurfaces::fit(design, mesh),
+        || printed_bodies(design, mesh).context("building the printed bodies"),
+    );
+    let bodies = bodies?;
+    let (step, ((mut checks, report), (solid_checks, encoded))) = rayon::join(
+        || {
+            surfaces
+                .and_then(|surfaces| moirecast_brep::printed_step_on(&surfaces, mesh, &bodies))
+                .context("building the printed bodies' B-rep")
+        },
         || {
             rayon::join(
+                || measure_printed(design, mesh, &bodies),
                 || {
-                    rayon::join(
-                        || stl_bytes(stls[0].0, stls[0].1),
-                        || stl_bytes(stls[1].0, stls[1].1),
-                    )
-                },
-                || {
-                    threemf_bytes(
-                        "device.3mf",
-                        &[
-                            Object {
-                                name: "clear",
-                                solid: clear,
-                                material: CLEAR,
-                            },
-                            Object {
-                                name: "black",
-                                solid: black,
-                                material: BLACK,
-                            },
-                        ],
-                    )
+                    let (checks, solids) = body_solids(&bodies);
+                    (checks, solids.map(encode))
                 },
             )
         },
     );
-    let step = step.context("building the printed bodies' B-rep")?;
+    let encoded = encoded.transpose()?;
+    checks.splice(0..0, solid_checks);
+    Ok(PrintedFiles {
+        bodies,
+        checks,
+        report,
+        encoded,
+        step,
+    })
+}
+
+/// The bodies' STLs and 3MF, encoded side by side.
+fn encode([clear, black]: [SolidMesh; 2]) -> Result<Encoded> {
+    let ((clear_stl, black_stl), threemf) = rayon::join(
+        || {
+            rayon::join(
+                || stl_bytes("device-clear.stl", clear),
+                || stl_bytes("device-black.stl", black),
+            )
+        },
+        || {
+            threemf_bytes(
+                "device.3mf",
+                &[
+                    Object {
+                        name: "clear",
+                        solid: clear,
+                        material: CLEAR,
+                    },
+                    Object {
+                        name: "black",
+                        solid: black,
+                        material: BLACK,
+                    },
+                ],
+            )
+        },
+    );
+    let stl = |name, solid: SolidMesh, bytes: Vec<u8>| {
+        (name, FileReport::of(solid.mesh(), bytes.len()), bytes)
+    };
+    Ok(Encoded {
+        stls: [
+            stl("device-clear.stl", clear, clear_stl?),
+            stl("device-black.stl", black, black_stl?),
+        ],
+        threemf: threemf?,
+    })
+}
+
+/// Writes `device-clear.stl`, `device-black.stl`, `device.3mf`,
+/// `device-clear.step`, `device-black.step` and `report.json` for a
+/// printed design meshed as `mesh`: the device mesh's solid checks first
+/// (the bodies are cut from it), then its measurements beside the bodies'
+/// whole build; every check passed before anything is written.
+pub(crate) fn write_printed_device(
+    spec: &Spec,
+    mesh: DeviceMesh,
+    thoroughness: Thoroughness,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<DeviceOutcome> {
+    let design = &spec.design;
+    progress.stage("checking", 1);
+    let (mut checks, _) = SolidMesh::validate(&mesh.mesh);
+    refuse_failed(&checks)?;
+    progress.tick(1);
+    progress.stage("measuring; printed bodies, B-rep and STEP", 1);
+    let ((lens_stats, measured), printed) = rayon::join(
+        || measure_device(design, &mesh, thoroughness),
+        || printed_files(design, &mesh),
+    );
+    // reported in the order they ran before: the device's, then the bodies'
+    checks.extend(measured.iter().cloned());
+    refuse_failed(&checks)?;
+    let printed = printed?;
+    checks.extend(printed.checks.iter().cloned());
+    refuse_failed(&checks)?;
+    let encoded = printed
+        .encoded
+        .context("the printed bodies passed their solid checks")?;
+    let step = printed.step?;
     refuse_failed(&step.checks)?;
     checks.extend(step.checks.iter().cloned());
-    for ((name, solid), bytes) in stls.into_iter().zip([clear_stl?, black_stl?]) {
-        reports.insert(name.to_string(), FileReport::of(solid.mesh(), bytes.len()));
+    progress.tick(1);
+    progress.stage("writing", 1);
+    let mut files = OutputSet::new();
+    let mut reports = std::collections::BTreeMap::new();
+    for (name, report, bytes) in encoded.stls {
+        reports.insert(name.to_string(), report);
         files.add(name, bytes);
     }
-    let threemf = threemf?;
-    files.add("device.3mf", threemf);
+    files.add("device.3mf", encoded.threemf);
     let mut printed_report = printed.report.clone();
     printed_report.brep = Some(PrintedBrepReport {
         clear_step_bytes: step.clear_step.len(),
@@ -267,9 +360,14 @@ pub(crate) fn write_printed_device(
     });
     files.add("device-clear.step", step.clear_step.into_bytes());
     files.add("device-black.step", step.black_step.into_bytes());
+    let build = DeviceBuild {
+        mesh,
+        lens_stats,
+        checks: measured,
+    };
     let report = report::device_report(
         spec,
-        build,
+        &build,
         &checks,
         report::DeviceOutputs {
             files: reports,
@@ -280,6 +378,7 @@ pub(crate) fn write_printed_device(
     );
     let (written, bytes) = commit_with_report(files, &report, out)?;
     progress.tick(1);
+    let b = &printed.bodies;
     Ok(DeviceOutcome::new(
         written,
         b.clear.triangles.len() + b.black.triangles.len(),

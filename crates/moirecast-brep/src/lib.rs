@@ -17,7 +17,9 @@ pub mod topology;
 
 pub use crosscheck::{compare, tessellate, verdicts, CrossCheck};
 pub use error::BrepError;
-pub use printed::{build_printed_brep, PrintedBrep, PrintedBrepStats};
+pub use printed::{
+    build_printed_brep, build_printed_brep_on, PrintedBrep, PrintedBrepStats, PrintedSurfaces,
+};
 pub use solid::{build_brep, BrepStats, DeviceBrep};
 pub use step::{read_back_faces, step_text, step_text_of};
 
@@ -79,7 +81,18 @@ pub fn printed_step(
     dm: &DeviceMesh,
     bodies: &PrintedBodies,
 ) -> Result<PrintedStep, BrepError> {
-    let brep = build_printed_brep(design, dm, bodies)?;
+    printed_step_on(&PrintedSurfaces::fit(design, dm)?, dm, bodies)
+}
+
+/// [`printed_step`] on surfaces already fitted over `dm` (fitted while the
+/// bodies were built).
+pub fn printed_step_on(
+    surfaces: &PrintedSurfaces,
+    dm: &DeviceMesh,
+    bodies: &PrintedBodies,
+) -> Result<PrintedStep, BrepError> {
+    let design = surfaces.design();
+    let brep = build_printed_brep_on(surfaces, dm, bodies)?;
     let (clear_step, black_step) = rayon::join(
         || {
             step_text(

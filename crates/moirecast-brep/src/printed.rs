@@ -66,15 +66,41 @@ pub struct PrintedBrep {
     pub stats: PrintedBrepStats,
 }
 
-/// The surfaces the bodies' faces lie on.
-struct Surfaces<'a> {
+/// The lens and band-span surfaces of a printed design, fitted over its
+/// device mesh: the part of the bodies' B-rep that needs only the device
+/// mesh, so it can be built while the bodies are.
+pub struct PrintedSurfaces<'a> {
     design: &'a Design,
     printed: PrintedBase,
     revealer: LensFamily,
     base: LensFamily,
 }
 
-impl Surfaces<'_> {
+impl<'a> PrintedSurfaces<'a> {
+    /// Fits the surfaces of `design` (meshed as `dm`); each is within
+    /// `FIT_SHARE × tolerance` of its exact section, or
+    /// [`BrepError::SurfaceFit`].
+    pub fn fit(design: &'a Design, dm: &DeviceMesh) -> Result<Self, BrepError> {
+        let BaseKind::Printed(printed) = design.params.base.kind else {
+            return Err(BrepError::Topology(
+                "the design's base is not printed".into(),
+            ));
+        };
+        let device_pieces = pieces(&dm.mesh, &dm.patches)?;
+        let (revealer, base) = lens_families(design, dm, &device_pieces)?;
+        Ok(PrintedSurfaces {
+            design,
+            printed,
+            revealer,
+            base,
+        })
+    }
+
+    /// The design the surfaces were fitted for.
+    pub fn design(&self) -> &'a Design {
+        self.design
+    }
+
     /// Band span k of s moved down to `layer`.
     fn section(&self, k: i64, layer: Layer) -> Result<NurbsSurface<Vector4>, BrepError> {
         let surface = self.base.surfaces.get(&k).ok_or_else(|| {
@@ -179,19 +205,16 @@ pub fn build_printed_brep(
     dm: &DeviceMesh,
     bodies: &PrintedBodies,
 ) -> Result<PrintedBrep, BrepError> {
-    let BaseKind::Printed(printed) = design.params.base.kind else {
-        return Err(BrepError::Topology(
-            "the design's base is not printed".into(),
-        ));
-    };
-    let device_pieces = pieces(&dm.mesh, &dm.patches)?;
-    let (revealer, base) = lens_families(design, dm, &device_pieces)?;
-    let surfaces = Surfaces {
-        design,
-        printed,
-        revealer,
-        base,
-    };
+    build_printed_brep_on(&PrintedSurfaces::fit(design, dm)?, dm, bodies)
+}
+
+/// [`build_printed_brep`] on surfaces already fitted over `dm`.
+pub fn build_printed_brep_on(
+    surfaces: &PrintedSurfaces,
+    dm: &DeviceMesh,
+    bodies: &PrintedBodies,
+) -> Result<PrintedBrep, BrepError> {
+    let design = surfaces.design;
     let clear = Body {
         mesh: &bodies.clear,
         faces: &bodies.clear_faces,
@@ -204,8 +227,8 @@ pub fn build_printed_brep(
     };
     // the two bodies share only the lens surfaces: built side by side
     let (clear_shells, black_shells) = rayon::join(
-        || body_shells(&surfaces, dm, &clear),
-        || body_shells(&surfaces, dm, &black),
+        || body_shells(surfaces, dm, &clear),
+        || body_shells(surfaces, dm, &black),
     );
     let ((clear_shells, clear_counts), (black_shells, black_counts)) =
         (clear_shells?, black_shells?);
@@ -283,7 +306,7 @@ struct Counts {
 /// The faces of one body as shells, one per connected set of faces in the
 /// order of their first triangle (deterministic), and the body's counts.
 fn body_shells(
-    surfaces: &Surfaces,
+    surfaces: &PrintedSurfaces,
     dm: &DeviceMesh,
     body: &Body,
 ) -> Result<(Vec<Shell>, Counts), BrepError> {
