@@ -379,11 +379,13 @@ pub(crate) fn write_printed_device(
     let (written, bytes) = commit_with_report(files, &report, out)?;
     progress.tick(1);
     let b = &printed.bodies;
-    Ok(DeviceOutcome::new(
+    let outcome = DeviceOutcome::new(
         written,
         b.clear.triangles.len() + b.black.triangles.len(),
         printed.report.device_volume_mm3,
         bytes,
         &checks,
-    ))
+    );
+    moirecast_export::free_in_background((build, printed.bodies, step.brep));
+    Ok(outcome)
 }

@@ -166,8 +166,19 @@ impl OutputSet {
                 });
             }
         }
+        free_in_background(self.files);
         Ok(temps.into_iter().map(|(_, t)| t).collect())
     }
+}
+
+/// Frees `value` on a short-lived thread of its own. A run's meshes, B-rep
+/// and file buffers (hundreds of MB) take tens of milliseconds to free;
+/// once their files are written, nothing needs to wait for that. (If no
+/// thread can be started, `value` is freed here.)
+pub fn free_in_background<T: Send + 'static>(value: T) {
+    let _ = std::thread::Builder::new()
+        .name("free".into())
+        .spawn(move || drop(value));
 }
 
 #[cfg(test)]
