@@ -86,8 +86,7 @@ impl<'a> PrintedSurfaces<'a> {
                 "the design's base is not printed".into(),
             ));
         };
-        let device_pieces = pieces(&dm.mesh, &dm.patches)?;
-        let (revealer, base) = lens_families(design, dm, &device_pieces)?;
+        let (revealer, base) = lens_families(design, dm)?;
         Ok(PrintedSurfaces {
             design,
             printed,

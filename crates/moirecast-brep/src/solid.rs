@@ -21,6 +21,7 @@ use glam::DVec3;
 use moirecast_kernel::mesher::{DeviceMesh, Patch, Side};
 use moirecast_kernel::model::LensRef;
 use moirecast_kernel::{Design, Tolerance};
+use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
 use truck_modeling::{
     BSplineCurve, Curve, Cut, Edge, Face, Line, ParametricSurface3D, Plane, Point3, Shell,
@@ -109,8 +110,12 @@ fn family_key(lens: LensRef) -> (Array, i64) {
 /// `FIT_SHARE × tolerance` of its exact lens at every sampled point, or this
 /// fails with [`BrepError::SurfaceFit`].
 pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepError> {
-    let pieces = pieces(&dm.mesh, &dm.patches)?;
-    let (revealer, base) = lens_families(design, dm, &pieces)?;
+    // the faces' topology and the lens surfaces are independent
+    let (pieces, families) = rayon::join(
+        || pieces(&dm.mesh, &dm.patches),
+        || lens_families(design, dm),
+    );
+    let (pieces, (revealer, base)) = (pieces?, families?);
     let surface_of = |lens: LensRef| match lens {
         LensRef::Revealer(i) => &revealer.surfaces[&i],
         LensRef::Base(k) => &base.surfaces[&k],
@@ -163,36 +168,52 @@ pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepEr
 }
 
 /// The lens surfaces of both arrays (for a printed design, the base's are
-/// its band spans of s), over the stations the faces of `pieces` (the
-/// device mesh's) span, each within `FIT_SHARE × tolerance` of the exact
+/// its band spans of s), over the stations the lenses' faces on the device
+/// mesh `dm` span, each within `FIT_SHARE × tolerance` of the exact
 /// sections at every sampled point, or [`BrepError::SurfaceFit`].
 pub fn lens_families(
     design: &Design,
     dm: &DeviceMesh,
-    pieces: &[Piece],
 ) -> Result<(LensFamily, LensFamily), BrepError> {
     let tolerance: Tolerance = design.tolerance;
-    // lenses with faces, and the station range their faces span (a
-    // coordinate of the parameter plane is extreme on a face's boundary)
-    let mut ranges: BTreeMap<(u8, i64), (f64, f64)> = BTreeMap::new();
-    for piece in pieces {
-        let Some(lens) = lens_of(piece.patch) else {
-            continue;
+    // lenses with faces, and the station range their triangles span (a
+    // face's extreme stations are on its boundary; every vertex of a lens
+    // triangle is on the lens, so no topology is needed)
+    type Ranges = BTreeMap<(u8, i64), (f64, f64)>;
+    let add =
+        |mut ranges: Ranges, (tri, patch): (&[u32; 3], &Patch)| -> Result<Ranges, BrepError> {
+            let Some(lens) = lens_of(*patch) else {
+                return Ok(ranges);
+            };
+            let (array, k) = family_key(lens);
+            let entry = ranges
+                .entry((array as u8, k))
+                .or_insert((f64::INFINITY, f64::NEG_INFINITY));
+            for &v in tri {
+                let pv = dm.origins[v as usize].params_on(lens).ok_or_else(|| {
+                    BrepError::Topology(format!(
+                        "vertex {v} of a triangle of {lens:?} has no parameters on it"
+                    ))
+                })?;
+                entry.0 = entry.0.min(pv.y);
+                entry.1 = entry.1.max(pv.y);
+            }
+            Ok(ranges)
         };
-        let (array, k) = family_key(lens);
-        let entry = ranges
-            .entry((array as u8, k))
-            .or_insert((f64::INFINITY, f64::NEG_INFINITY));
-        for v in piece.loops.iter().flatten().flat_map(|run| &run.vertices) {
-            let pv = dm.origins[*v as usize].params_on(lens).ok_or_else(|| {
-                BrepError::Topology(format!(
-                    "vertex {v} on the boundary of {lens:?} has no parameters on it"
-                ))
-            })?;
-            entry.0 = entry.0.min(pv.y);
-            entry.1 = entry.1.max(pv.y);
-        }
-    }
+    let ranges: Ranges = dm
+        .mesh
+        .triangles
+        .par_iter()
+        .zip(&dm.patches)
+        .try_fold(Ranges::new, add)
+        .try_reduce(Ranges::new, |mut a, b| {
+            for (key, (lo, hi)) in b {
+                let entry = a.entry(key).or_insert((f64::INFINITY, f64::NEG_INFINITY));
+                entry.0 = entry.0.min(lo);
+                entry.1 = entry.1.max(hi);
+            }
+            Ok(a)
+        })?;
     let margin = MARGIN_PERIODS * design.params.period;
     let fit = FIT_SHARE * tolerance.mm();
     let family = |array: Array| -> Result<LensFamily, BrepError> {
