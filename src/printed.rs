@@ -10,7 +10,7 @@ use anyhow::{Context, Result};
 use moirecast_export::{stl_bytes, threemf_bytes, Material, Object, OutputSet};
 use moirecast_kernel::check::{CheckResult, SolidMesh, SolidSpec};
 use moirecast_kernel::mesher::DeviceMesh;
-use moirecast_kernel::printed::{duty_along_lines, printed_bodies, PrintedBodies};
+use moirecast_kernel::printed::{duty_along_lines, printed_bodies, LineDuty, PrintedBodies};
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{BaseKind, Design, PrintedBase};
 use moirecast_spec::Spec;
@@ -103,12 +103,13 @@ impl PrintedBuild {
     /// each) and the whole device, run once; the two bodies as solids if
     /// they all passed.
     pub fn solids(&self) -> (Vec<CheckResult>, Option<[SolidMesh<'_>; 2]>) {
-        body_solids(&self.bodies)
+        let (checks, solids) = body_solids(&self.bodies);
+        (checks, solids.map(|[clear, black, _]| [clear, black]))
     }
 }
 
 /// [`PrintedBuild::solids`] of `b`.
-fn body_solids(b: &PrintedBodies) -> (Vec<CheckResult>, Option<[SolidMesh<'_>; 2]>) {
+fn body_solids(b: &PrintedBodies) -> (Vec<CheckResult>, Option<[SolidMesh<'_>; 3]>) {
     let spec = |genus, shells| SolidSpec {
         genus,
         shells,
@@ -137,7 +138,7 @@ fn body_solids(b: &PrintedBodies) -> (Vec<CheckResult>, Option<[SolidMesh<'_>; 2
     let (checks, solids): (Vec<Vec<CheckResult>>, Vec<_>) = results.into_iter().unzip();
     let checks = checks.concat();
     let all = match solids[..] {
-        [Some(clear), Some(black), Some(_)] => Some([clear, black]),
+        [Some(clear), Some(black), Some(slab)] => Some([clear, black, slab]),
         _ => None,
     };
     (checks, all)
@@ -155,7 +156,11 @@ fn printed_base(design: &Design) -> PrintedBase {
 /// volume and along lines.
 pub fn build_printed(design: &Design, mesh: &DeviceMesh) -> Result<PrintedBuild> {
     let bodies = printed_bodies(design, mesh).context("building the printed bodies")?;
-    let (checks, report) = measure_printed(design, mesh, &bodies);
+    let (volumes, lines) = rayon::join(
+        || [&bodies.clear, &bodies.black, &bodies.slab].map(|m| m.volume()),
+        || duty_along_lines(design, mesh, DUTY_LINES),
+    );
+    let (checks, report) = measure_printed(design, &bodies, volumes, &lines);
     Ok(PrintedBuild {
         bodies,
         checks,
@@ -163,25 +168,18 @@ pub fn build_printed(design: &Design, mesh: &DeviceMesh) -> Result<PrintedBuild>
     })
 }
 
-/// What is measured of the bodies: the fill check (clear and black add up
-/// to the device) and the report's volumes and duty cycle.
+/// What is measured of the bodies, given the volumes (mm³) of the clear
+/// body, the black bands and the whole device, and the duty along lines:
+/// the fill check (clear and black add up to the device) and the report's
+/// volumes and duty cycle.
 fn measure_printed(
     design: &Design,
-    mesh: &DeviceMesh,
     bodies: &PrintedBodies,
+    [clear, black, slab]: [f64; 3],
+    lines: &LineDuty,
 ) -> (Vec<CheckResult>, PrintedReport) {
     let pb = printed_base(design);
     let mut checks = Vec::new();
-    let ((clear, black, slab), lines) = rayon::join(
-        || {
-            (
-                bodies.clear.volume(),
-                bodies.black.volume(),
-                bodies.slab.volume(),
-            )
-        },
-        || duty_along_lines(design, mesh, DUTY_LINES),
-    );
     checks.push(CheckResult::at_most(
         "bodies-fill-device",
         ((clear + black) - slab).abs() / slab,
@@ -218,12 +216,12 @@ fn measure_printed(
 /// The printed device's files, encoded, and what was checked of them.
 struct PrintedFiles {
     bodies: PrintedBodies,
-    /// The bodies' solid checks and the fill check, passed or not.
+    /// The bodies' solid checks, passed or not, and (if they passed) the
+    /// fill check.
     checks: Vec<CheckResult>,
-    report: PrintedReport,
-    /// `device-clear.stl`, `device-black.stl` and `device.3mf`, if the
-    /// bodies passed their solid checks.
-    encoded: Option<Encoded>,
+    /// The report's numbers and `device-clear.stl`, `device-black.stl` and
+    /// `device.3mf`, if the bodies passed their solid checks.
+    solid: Option<(PrintedReport, Encoded)>,
     step: Result<moirecast_brep::PrintedStep>,
 }
 
@@ -234,16 +232,17 @@ struct Encoded {
 }
 
 /// Builds the bodies from the device mesh `mesh` (solid, not yet
-/// measured), then side by side: their measurements; their solid checks
-/// and, if passed, their STLs and 3MF; their B-rep and STEP. The B-rep's
-/// lens and band surfaces are fitted while the bodies are built.
+/// measured), then side by side: their B-rep and STEP; the duty cycle
+/// along lines; their solid checks and, if passed, their STLs and 3MF. The
+/// B-rep's lens and band surfaces are fitted while the bodies are built;
+/// the volumes are those the solid checks measured.
 fn printed_files(design: &Design, mesh: &DeviceMesh) -> Result<PrintedFiles> {
     let (surfaces, bodies) = rayon::join(
         || moirecast_brep::PrintedSurfaces::fit(design, mesh),
         || printed_bodies(design, mesh).context("building the printed bodies"),
     );
     let bodies = bodies?;
-    let (step, ((mut checks, report), (solid_checks, encoded))) = rayon::join(
+    let (step, (lines, (mut checks, solids))) = rayon::join(
         || {
             surfaces
                 .and_then(|surfaces| moirecast_brep::printed_step_on(&surfaces, mesh, &bodies))
@@ -251,21 +250,30 @@ fn printed_files(design: &Design, mesh: &DeviceMesh) -> Result<PrintedFiles> {
         },
         || {
             rayon::join(
-                || measure_printed(design, mesh, &bodies),
+                || duty_along_lines(design, mesh, DUTY_LINES),
                 || {
                     let (checks, solids) = body_solids(&bodies);
-                    (checks, solids.map(encode))
+                    let encoded = solids.map(|[clear, black, slab]| {
+                        let volumes = [clear, black, slab].map(|s| s.volume());
+                        (volumes, encode([clear, black]))
+                    });
+                    (checks, encoded)
                 },
             )
         },
     );
-    let encoded = encoded.transpose()?;
-    checks.splice(0..0, solid_checks);
+    let solid = match solids {
+        Some((volumes, encoded)) => {
+            let (fill, report) = measure_printed(design, &bodies, volumes, &lines);
+            checks.extend(fill);
+            Some((report, encoded?))
+        }
+        None => None,
+    };
     Ok(PrintedFiles {
         bodies,
         checks,
-        report,
-        encoded,
+        solid,
         step,
     })
 }
@@ -337,8 +345,8 @@ pub(crate) fn write_printed_device(
     let printed = printed?;
     checks.extend(printed.checks.iter().cloned());
     refuse_failed(&checks)?;
-    let encoded = printed
-        .encoded
+    let (mut printed_report, encoded) = printed
+        .solid
         .context("the printed bodies passed their solid checks")?;
     let step = printed.step?;
     refuse_failed(&step.checks)?;
@@ -352,7 +360,7 @@ pub(crate) fn write_printed_device(
         files.add(name, bytes);
     }
     files.add("device.3mf", encoded.threemf);
-    let mut printed_report = printed.report.clone();
+    let device_volume = printed_report.device_volume_mm3;
     printed_report.brep = Some(PrintedBrepReport {
         clear_step_bytes: step.clear_step.len(),
         black_step_bytes: step.black_step.len(),
@@ -382,7 +390,7 @@ pub(crate) fn write_printed_device(
     let outcome = DeviceOutcome::new(
         written,
         b.clear.triangles.len() + b.black.triangles.len(),
-        printed.report.device_volume_mm3,
+        device_volume,
         bytes,
         &checks,
     );

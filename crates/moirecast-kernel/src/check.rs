@@ -124,6 +124,11 @@ pub fn solid_checks_of_genus(mesh: &Mesh, genus: u32) -> Vec<CheckResult> {
 
 /// The solid checks against `spec`.
 pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
+    solid_checks_and_volume(mesh, spec).0
+}
+
+/// [`solid_checks_for`] and the volume its `positive-volume` check measured.
+fn solid_checks_and_volume(mesh: &Mesh, spec: SolidSpec) -> (Vec<CheckResult>, f64) {
     let genus = spec.genus;
     let mut out = Vec::new();
     let bad_coords = mesh.positions.iter().filter(|p| !p.is_finite()).count();
@@ -224,7 +229,7 @@ pub fn solid_checks_for(mesh: &Mesh, spec: SolidSpec) -> Vec<CheckResult> {
             at.x, at.y, at.z
         ),
     ));
-    out
+    (out, volume)
 }
 
 /// Directed edges of `mesh` not matched by exactly one opposite edge (with
@@ -360,6 +365,8 @@ fn f32_rounding_faults(mesh: &Mesh) -> (usize, usize) {
 #[derive(Clone, Copy, Debug)]
 pub struct SolidMesh<'a> {
     mesh: &'a Mesh,
+    /// Measured by the `positive-volume` check.
+    volume: f64,
 }
 
 impl<'a> SolidMesh<'a> {
@@ -373,13 +380,18 @@ impl<'a> SolidMesh<'a> {
         mesh: &'a Mesh,
         spec: SolidSpec,
     ) -> (Vec<CheckResult>, Option<SolidMesh<'a>>) {
-        let checks = solid_checks_for(mesh, spec);
+        let (checks, volume) = solid_checks_and_volume(mesh, spec);
         let ok = checks.iter().all(|c| c.passed);
-        (checks, ok.then_some(SolidMesh { mesh }))
+        (checks, ok.then_some(SolidMesh { mesh, volume }))
     }
 
     pub fn mesh(&self) -> &'a Mesh {
         self.mesh
+    }
+
+    /// The solid's volume (mm³), as its checks measured it.
+    pub fn volume(&self) -> f64 {
+        self.volume
     }
 }
 
@@ -391,13 +403,18 @@ impl<'a> SolidMesh<'a> {
 pub struct CheckedMesh {
     mesh: Mesh,
     checks: Vec<CheckResult>,
+    volume: f64,
 }
 
 impl CheckedMesh {
     /// Runs [`solid_checks_for`] on `mesh` against `spec`.
     pub fn check(mesh: Mesh, spec: SolidSpec) -> Self {
-        let checks = solid_checks_for(&mesh, spec);
-        CheckedMesh { mesh, checks }
+        let (checks, volume) = solid_checks_and_volume(&mesh, spec);
+        CheckedMesh {
+            mesh,
+            checks,
+            volume,
+        }
     }
 
     pub fn mesh(&self) -> &Mesh {
@@ -411,10 +428,10 @@ impl CheckedMesh {
 
     /// The mesh as a [`SolidMesh`] if every check passed; not checked again.
     pub fn solid(&self) -> Option<SolidMesh<'_>> {
-        self.checks
-            .iter()
-            .all(|c| c.passed)
-            .then_some(SolidMesh { mesh: &self.mesh })
+        self.checks.iter().all(|c| c.passed).then_some(SolidMesh {
+            mesh: &self.mesh,
+            volume: self.volume,
+        })
     }
 }
 
@@ -436,6 +453,9 @@ mod tests {
             assert!(c.passed, "{c:?}");
         }
         assert!((tetra().volume() - 1.0 / 6.0).abs() < 1e-15);
+        let m = tetra();
+        let (_, solid) = SolidMesh::validate(&m);
+        assert_eq!(solid.unwrap().volume(), m.volume());
     }
 
     #[test]
