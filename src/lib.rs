@@ -243,7 +243,7 @@ pub fn run_device(
     );
     let mut files = OutputSet::new();
     files.add("device.stl", stl);
-    files.add("device.step", step.step.into_bytes());
+    files.add("device.step", StepFile(step.step));
     let (written, bytes) = commit_with_report(files, &report, out)?;
     progress.tick(1);
     Ok(DeviceOutcome::new(
@@ -253,6 +253,18 @@ pub fn run_device(
         bytes,
         &checks,
     ))
+}
+
+/// A STEP file staged in its pieces (never joined in memory).
+pub(crate) struct StepFile(pub moirecast_brep::StepText);
+
+impl moirecast_export::FileContent for StepFile {
+    fn size(&self) -> usize {
+        self.0.len()
+    }
+    fn pieces(&self) -> Vec<&[u8]> {
+        self.0.pieces().map(str::as_bytes).collect()
+    }
 }
 
 /// Area (mm²) of the lens faces of the direct mesh.

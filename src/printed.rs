@@ -4,7 +4,8 @@
 
 use crate::report::{self, FileReport};
 use crate::{
-    commit_with_report, measure_device, refuse_failed, DeviceBuild, DeviceOutcome, Thoroughness,
+    commit_with_report, measure_device, refuse_failed, DeviceBuild, DeviceOutcome, StepFile,
+    Thoroughness,
 };
 use anyhow::{Context, Result};
 use moirecast_export::{stl_bytes, threemf_bytes, Material, Object, OutputSet};
@@ -366,8 +367,8 @@ pub(crate) fn write_printed_device(
         black_step_bytes: step.black_step.len(),
         stats: step.brep.stats.clone(),
     });
-    files.add("device-clear.step", step.clear_step.into_bytes());
-    files.add("device-black.step", step.black_step.into_bytes());
+    files.add("device-clear.step", StepFile(step.clear_step));
+    files.add("device-black.step", StepFile(step.black_step));
     let build = DeviceBuild {
         mesh,
         lens_stats,

@@ -21,7 +21,7 @@ pub use printed::{
     build_printed_brep, build_printed_brep_on, PrintedBrep, PrintedBrepStats, PrintedSurfaces,
 };
 pub use solid::{build_brep, BrepStats, DeviceBrep};
-pub use step::{read_back_faces, step_text, step_text_of};
+pub use step::{read_back_faces, step_file_of, step_text, step_text_of, StepText};
 
 use moirecast_kernel::check::CheckResult;
 use moirecast_kernel::mesher::DeviceMesh;
@@ -31,7 +31,7 @@ use moirecast_kernel::Design;
 /// The device's B-rep, its STEP text and the check of its faces.
 pub struct DeviceStep {
     pub brep: DeviceBrep,
-    pub step: String,
+    pub step: StepText,
     /// `brep-surface-fit`, with its evidence. (A shell that is not closed
     /// is an error of [`build_brep`] itself.)
     pub checks: Vec<CheckResult>,
@@ -46,8 +46,8 @@ pub fn device_step(
     file_name: &str,
 ) -> Result<DeviceStep, BrepError> {
     let brep = build_brep(design, dm)?;
-    let step = step_text(
-        &brep.solid,
+    let step = step_file_of(
+        std::slice::from_ref(&brep.solid),
         file_name,
         "moirecast device: level-line moire lens arrays",
     );
@@ -67,9 +67,9 @@ pub fn device_step(
 pub struct PrintedStep {
     pub brep: PrintedBrep,
     /// `device-clear.step`: the clear body.
-    pub clear_step: String,
+    pub clear_step: StepText,
     /// `device-black.step`: one solid per black band.
-    pub black_step: String,
+    pub black_step: StepText,
     /// `brep-surface-fit`, with its evidence.
     pub checks: Vec<CheckResult>,
 }
@@ -95,14 +95,14 @@ pub fn printed_step_on(
     let brep = build_printed_brep_on(surfaces, dm, bodies)?;
     let (clear_step, black_step) = rayon::join(
         || {
-            step_text(
-                &brep.clear,
+            step_file_of(
+                std::slice::from_ref(&brep.clear),
                 "device-clear.step",
                 "moirecast printed device: the clear body (lenses and backing)",
             )
         },
         || {
-            step_text_of(
+            step_file_of(
                 &brep.bands,
                 "device-black.step",
                 "moirecast printed device: the black bands, one solid each",

@@ -47,31 +47,85 @@ pub fn step_text(solid: &Solid, file_name: &str, description: &str) -> String {
 /// The STEP text of several `solids` in one file (each its own solid), as
 /// file `file_name`, with the same header as [`step_text`].
 pub fn step_text_of(solids: &[Solid], file_name: &str, description: &str) -> String {
+    step_file_of(solids, file_name, description).to_text()
+}
+
+/// The STEP file of `solids`, in pieces: [`step_text_of`] without joining
+/// its tens of MB into one string (a writer writes the pieces in order).
+pub fn step_file_of(solids: &[Solid], file_name: &str, description: &str) -> StepText {
     let compressed: Vec<_> = solids.iter().map(|s| s.compress()).collect();
     let queue = RefCell::new(Vec::new());
     let deferred: Vec<_> = compressed.iter().map(|s| defer(s, &queue)).collect();
     let layout = deferred.iter().collect::<StepModels<_, _, _>>().to_string();
     let queue = queue.take();
-    let texts: Vec<String> = queue
+    let geometries: Vec<String> = queue
         .par_iter()
+        // small tasks, so that a thread that frees up late still finds some
+        .with_max_len(16)
         .map(|&(idx, geometry)| geometry_text(geometry, idx))
         .collect();
+    assert_eq!(
+        layout.matches(MARKER).count(),
+        geometries.len(),
+        "one marker per curve or surface"
+    );
     let header = header(file_name, description);
-    const FOOTER: &str = "ENDSEC;\nEND-ISO-10303-21;\n";
-    let size =
-        header.len() + layout.len() + texts.iter().map(String::len).sum::<usize>() + FOOTER.len();
-    let mut out = String::with_capacity(size);
-    out.push_str(&header);
-    let mut pieces = layout.split(MARKER);
-    out.push_str(pieces.next().expect("split yields at least one piece"));
-    let mut texts = texts.iter();
-    for piece in pieces {
-        out.push_str(texts.next().expect("one text per marker"));
-        out.push_str(piece);
+    let len = header.len()
+        + layout.len()
+        + geometries.iter().map(String::len).sum::<usize>()
+        + FOOTER.len()
+        - geometries.len() * MARKER.len_utf8();
+    StepText {
+        header,
+        layout,
+        geometries,
+        len,
     }
-    assert!(texts.next().is_none(), "one marker per text");
-    out.push_str(FOOTER);
-    out
+}
+
+/// What ends every STEP file.
+const FOOTER: &str = "ENDSEC;\nEND-ISO-10303-21;\n";
+
+/// A STEP file held in pieces: its header, truck-stepio's layout with a
+/// marker for each curve and surface, their texts, and the footer.
+pub struct StepText {
+    header: String,
+    layout: String,
+    geometries: Vec<String>,
+    len: usize,
+}
+
+impl StepText {
+    /// The file's length in bytes.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The file's text in order, in pieces (some may be empty).
+    pub fn pieces(&self) -> impl Iterator<Item = &str> {
+        let mut layout = self.layout.split(MARKER);
+        let first = layout.next().expect("split yields at least one piece");
+        std::iter::once(self.header.as_str())
+            .chain(std::iter::once(first))
+            .chain(
+                self.geometries
+                    .iter()
+                    .zip(layout)
+                    .flat_map(|(g, l)| [g.as_str(), l]),
+            )
+            .chain(std::iter::once(FOOTER))
+    }
+
+    /// The whole text as one string.
+    pub fn to_text(&self) -> String {
+        let mut out = String::with_capacity(self.len);
+        self.pieces().for_each(|p| out.push_str(p));
+        out
+    }
 }
 
 /// The header written here, through `DATA;`.

@@ -71,6 +71,7 @@ pub fn stl_bytes(_file: &str, solid: SolidMesh) -> Result<Vec<u8>, ExportError> 
     out[HEADER..]
         .par_chunks_mut(FACET * CHUNK)
         .zip(mesh.triangles.par_chunks(CHUNK))
+        .with_max_len(1)
         .for_each(|(bytes, tris)| {
             for (facet, t) in bytes.chunks_exact_mut(FACET).zip(tris) {
                 for (slot, f) in facet.chunks_exact_mut(4).zip(stl_facet(mesh, t)) {
@@ -93,10 +94,28 @@ fn stl_facet(mesh: &moirecast_kernel::Mesh, t: &[u32; 3]) -> [f32; 12] {
         .expect("twelve")
 }
 
+/// A staged file's bytes: one buffer, or pieces written in order and never
+/// joined (a STEP file's tens of MB are written from its parts).
+pub trait FileContent: Send + Sync {
+    /// The file's size in bytes.
+    fn size(&self) -> usize;
+    /// The file's bytes in order.
+    fn pieces(&self) -> Vec<&[u8]>;
+}
+
+impl FileContent for Vec<u8> {
+    fn size(&self) -> usize {
+        self.len()
+    }
+    fn pieces(&self) -> Vec<&[u8]> {
+        vec![self]
+    }
+}
+
 /// Files staged for one output directory, written together by [`commit`](Self::commit).
 #[derive(Default)]
 pub struct OutputSet {
-    files: Vec<(String, Vec<u8>)>,
+    files: Vec<(String, Box<dyn FileContent>)>,
 }
 
 impl OutputSet {
@@ -104,16 +123,16 @@ impl OutputSet {
         Self::default()
     }
 
-    /// Stages `bytes` as `name` (a file name inside the directory).
-    pub fn add(&mut self, name: &str, bytes: Vec<u8>) {
-        self.files.push((name.to_owned(), bytes));
+    /// Stages `content` as `name` (a file name inside the directory).
+    pub fn add(&mut self, name: &str, content: impl FileContent + 'static) {
+        self.files.push((name.to_owned(), Box::new(content)));
     }
 
     /// Names and sizes of the staged files.
     pub fn sizes(&self) -> Vec<(String, usize)> {
         self.files
             .iter()
-            .map(|(n, b)| (n.clone(), b.len()))
+            .map(|(n, b)| (n.clone(), b.size()))
             .collect()
     }
 
@@ -146,8 +165,8 @@ impl OutputSet {
             .files
             .par_iter()
             .zip(&temps)
-            .map(|((_, bytes), (temp, _))| {
-                std::fs::write(temp, bytes).map_err(|source| ExportError::Io {
+            .map(|((_, content), (temp, _))| {
+                write_pieces(temp, &content.pieces()).map_err(|source| ExportError::Io {
                     path: temp.clone(),
                     source,
                 })
@@ -169,6 +188,29 @@ impl OutputSet {
         free_in_background(self.files);
         Ok(temps.into_iter().map(|(_, t)| t).collect())
     }
+}
+
+/// Writes `pieces`, in order, as the file `path`: a few vectored writes of
+/// up to 1024 pieces each.
+fn write_pieces(path: &Path, pieces: &[&[u8]]) -> std::io::Result<()> {
+    use std::io::{IoSlice, Write};
+    const BATCH: usize = 1024;
+    let mut file = std::fs::File::create(path)?;
+    let mut slices: Vec<IoSlice> = pieces
+        .iter()
+        .filter(|p| !p.is_empty())
+        .map(|p| IoSlice::new(p))
+        .collect();
+    let mut rest = &mut slices[..];
+    while !rest.is_empty() {
+        let batch = rest.len().min(BATCH);
+        let written = file.write_vectored(&rest[..batch])?;
+        if written == 0 {
+            return Err(std::io::ErrorKind::WriteZero.into());
+        }
+        IoSlice::advance_slices(&mut rest, written);
+    }
+    Ok(())
 }
 
 /// Frees `value` on a short-lived thread of its own. A run's meshes, B-rep
@@ -236,6 +278,34 @@ mod tests {
             })
             .count();
         assert_eq!(leftovers, 0);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A file staged in pieces is written whole, in order, past the
+    /// batches of vectored writes (empty pieces included).
+    #[test]
+    fn a_file_in_pieces_is_written_whole() {
+        struct Pieces(Vec<Vec<u8>>);
+        impl FileContent for Pieces {
+            fn size(&self) -> usize {
+                self.0.iter().map(Vec::len).sum()
+            }
+            fn pieces(&self) -> Vec<&[u8]> {
+                self.0.iter().map(Vec::as_slice).collect()
+            }
+        }
+        let pieces: Vec<Vec<u8>> = (0..5000u32)
+            .map(|i| i.to_string().into_bytes().repeat((i % 3) as usize))
+            .collect();
+        let whole = pieces.concat();
+        let dir =
+            std::env::temp_dir().join(format!("moirecast-pieces-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut set = OutputSet::new();
+        set.add("p.txt", Pieces(pieces));
+        assert_eq!(set.sizes(), vec![("p.txt".to_string(), whole.len())]);
+        set.commit(&dir).unwrap();
+        assert!(std::fs::read(dir.join("p.txt")).unwrap() == whole);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -213,6 +213,9 @@ fn deflate_in_parallel(pieces: &[Piece]) -> (Vec<u8>, u32, usize) {
     let parts: Vec<(Vec<u8>, crc32fast::Hasher, usize)> = pieces
         .par_iter()
         .enumerate()
+        // one task per piece: rayon otherwise splits into about four runs
+        // of pieces up front, and a thread that frees up late finds none
+        .with_max_len(1)
         .map(|(i, piece)| {
             let text = piece.write();
             let input = text.as_bytes();
