@@ -238,9 +238,11 @@ struct Encoded {
 /// B-rep's lens and band surfaces are fitted while the bodies are built;
 /// the volumes are those the solid checks measured.
 fn printed_files(design: &Design, mesh: &DeviceMesh) -> Result<PrintedFiles> {
-    let (surfaces, bodies) = rayon::join(
-        || moirecast_brep::PrintedSurfaces::fit(design, mesh),
+    // the bodies first on this thread: everything after waits for them,
+    // while the B-rep's surfaces are needed only for their B-rep
+    let (bodies, surfaces) = rayon::join(
         || printed_bodies(design, mesh).context("building the printed bodies"),
+        || moirecast_brep::PrintedSurfaces::fit(design, mesh),
     );
     let bodies = bodies?;
     let (step, (lines, (mut checks, solids))) = rayon::join(
@@ -336,9 +338,11 @@ pub(crate) fn write_printed_device(
     refuse_failed(&checks)?;
     progress.tick(1);
     progress.stage("measuring; printed bodies, B-rep and STEP", 1);
-    let ((lens_stats, measured), printed) = rayon::join(
-        || measure_device(design, &mesh, thoroughness),
+    // the bodies' build on this thread: it is the longer, and its serial
+    // stretches leave room for the measurements
+    let (printed, (lens_stats, measured)) = rayon::join(
         || printed_files(design, &mesh),
+        || measure_device(design, &mesh, thoroughness),
     );
     // reported in the order they ran before: the device's, then the bodies'
     checks.extend(measured.iter().cloned());

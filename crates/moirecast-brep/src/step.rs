@@ -143,7 +143,20 @@ fn header(file_name: &str, description: &str) -> String {
 /// The text of one curve or surface whose first entity is `idx`:
 /// truck-stepio's, with the same numbers.
 fn geometry_text(geometry: Geometry, idx: usize) -> String {
-    let mut w = Writer::default();
+    // room for every control point's line and the entity's lists, so the
+    // text is not copied as it grows
+    let points = match geometry {
+        Geometry::Surface(Surface::NurbsSurface(s)) => {
+            s.control_points().iter().map(Vec::len).sum()
+        }
+        Geometry::Curve(Curve::BSplineCurve(c)) => c.control_points().len(),
+        Geometry::Curve(Curve::NurbsCurve(c)) => c.control_points().len(),
+        _ => 0,
+    };
+    let mut w = Writer {
+        text: String::with_capacity(512 + 128 * points),
+        ..Writer::default()
+    };
     match geometry {
         Geometry::Surface(Surface::NurbsSurface(s)) => w.nurbs_surface(s, idx),
         Geometry::Curve(Curve::BSplineCurve(c)) => w.bspline_curve(c, idx),
@@ -173,6 +186,7 @@ const NURBS_CURVE: [&str; 3] = [
 struct Writer {
     text: String,
     floats: zmij::Buffer,
+    integers: itoa::Buffer,
 }
 
 impl Writer {
@@ -186,7 +200,7 @@ impl Writer {
     }
 
     fn usize(&mut self, n: usize) {
-        write!(self.text, "{n}").expect("writing to a String");
+        self.text.push_str(self.integers.format(n));
     }
 
     /// truck-stepio's `FloatDisplay`: `{:.10E}` below 0.01, else `{:?}`,
