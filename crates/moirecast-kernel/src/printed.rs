@@ -119,14 +119,20 @@ struct Body<'a> {
 }
 
 impl<'a> Body<'a> {
-    fn new(source: &'a [DVec3], pb: &PrintedBase) -> Self {
+    /// An empty body with room for `triangles` (an estimate: the vectors
+    /// grow past it, but rarely copy themselves as they grow).
+    fn new(source: &'a [DVec3], pb: &PrintedBase, triangles: usize) -> Self {
+        let vertices = triangles / 2 + 2;
         Body {
             source,
             printed: *pb,
             index: vec![u32::MAX; 3 * source.len()],
-            origin: Vec::new(),
-            faces: Vec::new(),
-            mesh: Mesh::default(),
+            origin: Vec::with_capacity(vertices),
+            faces: Vec::with_capacity(triangles),
+            mesh: Mesh {
+                positions: Vec::with_capacity(vertices),
+                triangles: Vec::with_capacity(triangles),
+            },
         }
     }
 
@@ -386,11 +392,21 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
             body.triangle(*t, Layer::Top, false, face);
         }
     };
+    // room for each body: the upper faces, each face of s at one or three
+    // layers, band sides (about one quad per face of s on the reference
+    // designs) and a margin
+    let upper_count = tris.len() - s_faces.len();
+    let black_count = s_faces.iter().filter(|f| f.is_black).count();
+    let (sides, margin) = (s_faces.len(), s_faces.len() / 8);
     // The three bodies are built side by side, each from the same walk over
     // s, so each numbers its vertices in the same first-use order as one
     // walk building all three would.
     let build_clear = || {
-        let mut clear = Body::new(pos, &pb);
+        let mut clear = Body::new(
+            pos,
+            &pb,
+            upper_count + s_faces.len() + 2 * black_count + sides + margin,
+        );
         let mut on_band: Vec<bool> = Vec::new();
         upper(&mut clear);
         for &SFace {
@@ -434,7 +450,7 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
         (clear, on_band)
     };
     let build_black = || {
-        let mut black = Body::new(pos, &pb);
+        let mut black = Body::new(pos, &pb, 2 * black_count + sides + margin);
         for &SFace {
             t,
             is_black,
@@ -457,7 +473,7 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
         black
     };
     let build_slab = || {
-        let mut slab = Body::new(pos, &pb);
+        let mut slab = Body::new(pos, &pb, upper_count + s_faces.len() + margin);
         upper(&mut slab);
         for &SFace { t, k, across, .. } in &s_faces {
             slab.triangle(t, Layer::Bottom, false, section(k, Layer::Bottom));
