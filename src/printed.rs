@@ -8,7 +8,7 @@ use crate::{
     Thoroughness,
 };
 use anyhow::{Context, Result};
-use moirecast_export::{stl_bytes, threemf_bytes, Material, Object, OutputSet};
+use moirecast_export::{stl_bytes, threemf_file, Material, Object, OutputSet, ThreemfFile};
 use moirecast_kernel::check::{CheckResult, SolidMesh, SolidSpec};
 use moirecast_kernel::mesher::DeviceMesh;
 use moirecast_kernel::printed::{duty_along_lines, printed_bodies, LineDuty, PrintedBodies};
@@ -229,7 +229,7 @@ struct PrintedFiles {
 /// The two STLs (with their reports) and the 3MF.
 struct Encoded {
     stls: [(&'static str, FileReport, Vec<u8>); 2],
-    threemf: Vec<u8>,
+    threemf: ThreemfFile,
 }
 
 /// Builds the bodies from the device mesh `mesh` (solid, not yet
@@ -291,7 +291,7 @@ fn encode([clear, black]: [SolidMesh; 2]) -> Result<Encoded> {
             )
         },
         || {
-            threemf_bytes(
+            threemf_file(
                 "device.3mf",
                 &[
                     Object {

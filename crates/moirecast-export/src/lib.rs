@@ -7,7 +7,7 @@
 
 mod threemf;
 
-pub use threemf::{model_xml, threemf_bytes, Material, Object};
+pub use threemf::{model_xml, threemf_bytes, threemf_file, Material, Object, ThreemfFile};
 
 use moirecast_kernel::check::SolidMesh;
 use std::path::{Path, PathBuf};

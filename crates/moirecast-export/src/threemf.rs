@@ -2,7 +2,7 @@
 //! several objects, each with its own base material and display colour —
 //! the format slicers read for multi-material parts.
 
-use crate::ExportError;
+use crate::{ExportError, FileContent};
 use moirecast_kernel::check::SolidMesh;
 use std::fmt::Write as _;
 
@@ -136,38 +136,63 @@ pub fn model_xml(objects: &[Object]) -> String {
 /// model deflated in parallel. Deterministic: fixed entry order, fixed
 /// timestamps (1980-01-01, zip's epoch), and chunking by size only.
 pub fn threemf_bytes(file: &str, objects: &[Object]) -> Result<Vec<u8>, ExportError> {
+    Ok(threemf_file(file, objects)?.pieces.concat())
+}
+
+/// The bytes of a 3MF package in pieces: headers and deflated pieces, in
+/// order, never joined (see [`FileContent`]).
+pub struct ThreemfFile {
+    pieces: Vec<Vec<u8>>,
+}
+
+impl FileContent for ThreemfFile {
+    fn size(&self) -> usize {
+        self.pieces.iter().map(Vec::len).sum()
+    }
+    fn pieces(&self) -> Vec<&[u8]> {
+        self.pieces.iter().map(Vec::as_slice).collect()
+    }
+}
+
+/// [`threemf_bytes`] in pieces.
+pub fn threemf_file(file: &str, objects: &[Object]) -> Result<ThreemfFile, ExportError> {
     let text = |t: &str| vec![Piece::Text(t.to_string())];
     let parts = [
         ("[Content_Types].xml", text(CONTENT_TYPES)),
         ("_rels/.rels", text(RELS)),
         ("3D/3dmodel.model", model_pieces(objects)),
     ];
-    let mut zip = Vec::new();
+    let mut pieces = Vec::new();
+    let mut written = 0usize;
     let mut central = Vec::new();
-    for (name, pieces) in &parts {
-        let (deflated, crc, size) = deflate_in_parallel(pieces);
+    for (name, text) in &parts {
+        let (deflated, crc, size) = deflate_in_parallel(text);
+        let compressed: usize = deflated.iter().map(Vec::len).sum();
         let too_big = |n: usize| u32::try_from(n).is_err();
-        if too_big(size) || too_big(zip.len()) {
+        if too_big(size) || too_big(compressed) || too_big(written) {
             return Err(ExportError::Io {
                 path: file.into(),
                 source: std::io::Error::other("over 4 GB: needs zip64, which is not written"),
             });
         }
-        let offset = zip.len() as u32;
+        let offset = written as u32;
         // the fields local and central headers share, from "version needed" on
         let mut common = Vec::new();
         for v in [20u16, 0, 8, 0, DOS_DATE_1980] {
             common.extend_from_slice(&v.to_le_bytes());
         }
-        for v in [crc, deflated.len() as u32, size as u32] {
+        for v in [crc, compressed as u32, size as u32] {
             common.extend_from_slice(&v.to_le_bytes());
         }
         common.extend_from_slice(&(name.len() as u16).to_le_bytes());
         common.extend_from_slice(&0u16.to_le_bytes()); // extra field length
-        zip.extend_from_slice(&0x0403_4b50u32.to_le_bytes());
-        zip.extend_from_slice(&common);
-        zip.extend_from_slice(name.as_bytes());
-        zip.extend_from_slice(&deflated);
+        let mut local = Vec::new();
+        local.extend_from_slice(&0x0403_4b50u32.to_le_bytes());
+        local.extend_from_slice(&common);
+        local.extend_from_slice(name.as_bytes());
+        written += local.len() + compressed;
+        pieces.push(local);
+        pieces.extend(deflated);
         central.extend_from_slice(&0x0201_4b50u32.to_le_bytes());
         central.extend_from_slice(&20u16.to_le_bytes()); // version made by
         central.extend_from_slice(&common);
@@ -179,16 +204,24 @@ pub fn threemf_bytes(file: &str, objects: &[Object]) -> Result<Vec<u8>, ExportEr
         central.extend_from_slice(&offset.to_le_bytes());
         central.extend_from_slice(name.as_bytes());
     }
-    let central_offset = zip.len() as u32;
-    zip.extend_from_slice(&central);
-    zip.extend_from_slice(&0x0605_4b50u32.to_le_bytes());
-    for v in [0u16, 0, parts.len() as u16, parts.len() as u16] {
-        zip.extend_from_slice(&v.to_le_bytes());
+    if u32::try_from(written).is_err() {
+        return Err(ExportError::Io {
+            path: file.into(),
+            source: std::io::Error::other("over 4 GB: needs zip64, which is not written"),
+        });
     }
-    zip.extend_from_slice(&(central.len() as u32).to_le_bytes());
-    zip.extend_from_slice(&central_offset.to_le_bytes());
-    zip.extend_from_slice(&0u16.to_le_bytes()); // comment length
-    Ok(zip)
+    let central_offset = written as u32;
+    let mut end = central;
+    let central_len = end.len() as u32;
+    end.extend_from_slice(&0x0605_4b50u32.to_le_bytes());
+    for v in [0u16, 0, parts.len() as u16, parts.len() as u16] {
+        end.extend_from_slice(&v.to_le_bytes());
+    }
+    end.extend_from_slice(&central_len.to_le_bytes());
+    end.extend_from_slice(&central_offset.to_le_bytes());
+    end.extend_from_slice(&0u16.to_le_bytes()); // comment length
+    pieces.push(end);
+    Ok(ThreemfFile { pieces })
 }
 
 /// 1980-01-01 as an MS-DOS date: ((1980 − 1980) << 9) | (1 << 5) | 1.
@@ -207,7 +240,7 @@ const DOS_DATE_1980: u16 = 0x21;
 /// is a tenth of what that run writes (its STEP files hold 40 MB).
 const LEVEL: u32 = 1;
 
-fn deflate_in_parallel(pieces: &[Piece]) -> (Vec<u8>, u32, usize) {
+fn deflate_in_parallel(pieces: &[Piece]) -> (Vec<Vec<u8>>, u32, usize) {
     use flate2::{Compress, Compression, FlushCompress, Status};
     use rayon::prelude::*;
     let parts: Vec<(Vec<u8>, crc32fast::Hasher, usize)> = pieces
@@ -249,10 +282,10 @@ fn deflate_in_parallel(pieces: &[Piece]) -> (Vec<u8>, u32, usize) {
         })
         .collect();
     let mut crc = crc32fast::Hasher::new();
-    let mut out = Vec::with_capacity(parts.iter().map(|p| p.0.len()).sum());
+    let mut out = Vec::with_capacity(parts.len());
     let mut size = 0;
     for (bytes, part, len) in parts {
-        out.extend_from_slice(&bytes);
+        out.push(bytes);
         crc.combine(&part);
         size += len;
     }
