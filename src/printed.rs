@@ -248,7 +248,7 @@ fn printed_files(design: &Design, mesh: &DeviceMesh) -> Result<PrintedFiles> {
     let (step, (lines, (mut checks, solids))) = rayon::join(
         || {
             surfaces
-                .and_then(|surfaces| moirecast_brep::printed_step_on(&surfaces, mesh, &bodies))
+                .and_then(|surfaces| moirecast_brep::printed_step(&surfaces, mesh, &bodies))
                 .context("building the printed bodies' B-rep")
         },
         || {

@@ -75,18 +75,9 @@ pub struct PrintedStep {
 }
 
 /// Builds the B-rep of a printed design's bodies (meshed as `dm`, its
-/// bodies `bodies`) and writes them as two STEP texts.
+/// bodies `bodies`, its lens and band surfaces `surfaces`, fitted while
+/// the bodies were built) and writes them as two STEP texts.
 pub fn printed_step(
-    design: &Design,
-    dm: &DeviceMesh,
-    bodies: &PrintedBodies,
-) -> Result<PrintedStep, BrepError> {
-    printed_step_on(&PrintedSurfaces::fit(design, dm)?, dm, bodies)
-}
-
-/// [`printed_step`] on surfaces already fitted over `dm` (fitted while the
-/// bodies were built).
-pub fn printed_step_on(
     surfaces: &PrintedSurfaces,
     dm: &DeviceMesh,
     bodies: &PrintedBodies,
