@@ -5,7 +5,8 @@
 //! serially; nearly all of the text is the control points of the surfaces
 //! and curves. So the layout pass writes a marker in place of each of them
 //! and records its index, and their text, truck-stepio's own, is then
-//! written in parallel and spliced in, on every core. The B-spline kinds
+//! written in parallel, on every core; the file stays in those pieces
+//! ([`StepText`]), which a writer writes in order. The B-spline kinds
 //! (all but a few planes) are written here in truck-stepio's form with
 //! zmij's floats in place of `core::fmt`'s (most of the text is numbers):
 //! the same text, but where a 17-digit tie rounds to even (the same

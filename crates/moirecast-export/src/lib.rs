@@ -58,14 +58,17 @@ pub fn validate<'a>(
 /// file, in parallel. The bytes are stl_io's `write_stl`'s (a test
 /// compares them); that writer goes through a `BufWriter` one f32 at a
 /// time and took four times as long on the printed reference.
-pub fn stl_bytes(_file: &str, solid: SolidMesh) -> Result<Vec<u8>, ExportError> {
+pub fn stl_bytes(file: &str, solid: SolidMesh) -> Result<Vec<u8>, ExportError> {
     use rayon::prelude::*;
     const HEADER: usize = 84;
     const FACET: usize = 50;
     /// Facets per parallel task.
     const CHUNK: usize = 16384;
     let mesh = solid.mesh();
-    let count = u32::try_from(mesh.triangles.len()).expect("fewer than 2³² triangles");
+    let count = u32::try_from(mesh.triangles.len()).map_err(|_| ExportError::Io {
+        path: file.into(),
+        source: std::io::Error::other("over 2³² triangles: a binary STL cannot count them"),
+    })?;
     let mut out = vec![0u8; HEADER + FACET * mesh.triangles.len()];
     out[80..HEADER].copy_from_slice(&count.to_le_bytes());
     out[HEADER..]
