@@ -735,14 +735,13 @@ pub fn duty_along_lines(design: &Design, dm: &DeviceMesh, lines: usize) -> LineD
 
 /// The x-interval where the line y = `y` crosses triangle `t` projected on xy.
 fn line_through_triangle(t: &[DVec3; 3], y: f64) -> Option<(f64, f64)> {
-    let mut xs = Vec::with_capacity(3);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for e in 0..3 {
         let (a, b) = (t[e], t[(e + 1) % 3]);
         if (a.y - y) * (b.y - y) <= 0.0 && a.y != b.y {
-            xs.push(a.x + (b.x - a.x) * (y - a.y) / (b.y - a.y));
+            let x = a.x + (b.x - a.x) * (y - a.y) / (b.y - a.y);
+            (lo, hi) = (lo.min(x), hi.max(x));
         }
     }
-    let lo = xs.iter().cloned().fold(f64::INFINITY, f64::min);
-    let hi = xs.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
     (hi > lo).then_some((lo, hi))
 }
