@@ -188,15 +188,37 @@ pub fn run_device(
         let mesh = mesh_device(&spec.design, progress).context("meshing the device")?;
         return printed::write_printed_device(spec, mesh, thoroughness, out, progress);
     }
-    let build = build_device_checked(&spec.design, thoroughness, progress)?;
-    let (checks, solid) = build.validated();
+    let design = &spec.design;
+    let mesh = mesh_device(design, progress).context("meshing the device")?;
+    progress.stage("checking, B-rep and STEP", 1);
+    // the B-rep is built from the mesh only once it is solid; the
+    // measurements, which only read it, and the STL run beside it
+    let (mut checks, solid) = SolidMesh::validate(&mesh.mesh);
     refuse_failed(&checks)?;
-    progress.stage("B-rep and STEP", 1);
-    let step = moirecast_brep::device_step(&spec.design, &build.mesh, "device.step")
-        .context("building the B-rep")?;
+    let ((lens_stats, measured), (step, direct_stl)) = rayon::join(
+        || measure_device(design, &mesh, thoroughness),
+        || {
+            rayon::join(
+                || moirecast_brep::device_step(design, &mesh, "device.step"),
+                || {
+                    (mesher == Mesher::Direct)
+                        .then(|| stl_bytes("device.stl", solid.expect("the solid checks passed")))
+                },
+            )
+        },
+    );
+    // refused in the order they are reported: solid checks, measurements,
+    // then the B-rep's
+    checks.extend(measured.iter().cloned());
+    refuse_failed(&checks)?;
+    let step = step.context("building the B-rep")?;
     refuse_failed(&step.checks)?;
-    let mut checks = checks;
     checks.extend(step.checks.iter().cloned());
+    let build = DeviceBuild {
+        mesh,
+        lens_stats,
+        checks: measured,
+    };
     progress.tick(1);
     let cross = match mesher {
         Mesher::Direct => None,
@@ -217,7 +239,7 @@ pub fn run_device(
     progress.stage("writing", 1);
     let (stl, stl_mesh) = match &cross {
         None => (
-            stl_bytes("device.stl", solid.expect("the solid checks passed"))?,
+            direct_stl.expect("encoded for the direct mesher")?,
             &build.mesh.mesh,
         ),
         Some((mesh, _)) => {
@@ -246,13 +268,15 @@ pub fn run_device(
     files.add("device.step", StepFile(step.step));
     let (written, bytes) = commit_with_report(files, &report, out)?;
     progress.tick(1);
-    Ok(DeviceOutcome::new(
+    let outcome = DeviceOutcome::new(
         written,
         stl_mesh.triangles.len(),
         report.files["device.stl"].volume_mm3,
         bytes,
         &checks,
-    ))
+    );
+    moirecast_export::free_in_background((build, step.brep, cross));
+    Ok(outcome)
 }
 
 /// A STEP file staged in its pieces (never joined in memory).
