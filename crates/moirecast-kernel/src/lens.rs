@@ -90,6 +90,17 @@ impl LensArc {
     }
 }
 
+/// Columns needed across an arc of radius `r` spanning `angle` (rad) for a
+/// chordal error of at most `e`.
+pub fn columns_for(r: f64, angle: f64, e: f64) -> usize {
+    let step = if e >= r {
+        std::f64::consts::PI
+    } else {
+        2.0 * (1.0 - e / r).acos()
+    };
+    ((angle / step).ceil() as usize).max(2)
+}
+
 /// Circle through three points: (centre, radius). `None` if collinear.
 pub fn circumcircle(a: DVec3, b: DVec3, c: DVec3) -> Option<(DVec3, f64)> {
     let (ab, ac) = (b - a, c - a);

@@ -12,6 +12,7 @@
 
 pub mod check;
 pub mod design;
+pub mod device_mesh;
 pub mod error;
 pub mod lens;
 pub mod measure;

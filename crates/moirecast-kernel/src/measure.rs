@@ -5,7 +5,7 @@
 use crate::check::CheckResult;
 use crate::design::Design;
 use crate::lens::circumcircle;
-use crate::mesher::{DeviceMesh, Patch, Side, VertexOrigin};
+use crate::device_mesh::{DeviceMesh, Patch, Side, VertexOrigin};
 use crate::model::LensRef;
 use crate::solve::newton_2d;
 use crate::tolerance::WALL_SNAP_MM;

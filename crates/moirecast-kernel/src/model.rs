@@ -268,7 +268,7 @@ impl BaseSection<'_> {
     pub fn columns(&self, e: f64) -> usize {
         match *self {
             BaseSection::Lens(arc) => {
-                crate::mesher::columns_for(arc.radius, 2.0 * arc.half_angle, e)
+                crate::lens::columns_for(arc.radius, 2.0 * arc.half_angle, e)
             }
             BaseSection::Band { .. } => {
                 let sag = (self.point(0.5) - 0.5 * (self.point(0.0) + self.point(1.0))).length();

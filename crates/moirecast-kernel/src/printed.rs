@@ -21,7 +21,7 @@
 use crate::design::{BaseKind, Design, PrintedBase};
 use crate::error::{KernelError, Result};
 use crate::mesh::Mesh;
-use crate::mesher::{DeviceMesh, Patch, Side, VertexOrigin};
+use crate::device_mesh::{DeviceMesh, Patch, Side, VertexOrigin};
 use crate::model::LensRef;
 use crate::tolerance::WALL_SNAP_MM;
 use glam::DVec3;

@@ -1,0 +1,398 @@
+//! The base: rows at exact heights y (every vertex solved onto its row),
+//! per lens the columns that lie inside the outline; where an x-wall cuts a
+//! base lens the cut vertex is solved onto the wall, and rows are added
+//! until each trim edge meets the same chordal bound as the lens columns.
+
+use super::plan::MeshPlan;
+use super::zip::{zip, Strip};
+use crate::design::Design;
+use crate::device_mesh::{DeviceMesh, Patch, Side, VertexOrigin};
+use crate::error::{KernelError, Result};
+use crate::model::LensRef;
+use crate::progress::Progress;
+use crate::solve::newton_2d;
+use crate::tolerance::{SOLVE_RESIDUAL_MM, WALL_SNAP_MM};
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+
+/// How far (mm) an interior base vertex may lie from its row's plane y = const.
+const INTERIOR_ROW_RESIDUAL_MM: f64 = 1e-6;
+
+/// One base row: its vertices (left to right) and, per base lens, the
+/// polyline of its vertices on this row.
+pub(super) struct BaseRow {
+    pub positions: Vec<DVec3>,
+    pub origins: Vec<VertexOrigin>,
+    /// Per lens k: None (absent) or local indices left to right (one index
+    /// when the lens only touches the row at a crease on a wall).
+    pub lenses: BTreeMap<i64, Vec<u32>>,
+    /// Local indices of the leftmost and rightmost vertex.
+    pub ends: (u32, u32),
+}
+
+impl BaseRow {
+    /// The lens that meets `side`'s x-wall on this row and the vertex where
+    /// it does. A lens that only touches the wall with a crease (one vertex)
+    /// counts: that crease also starts the next lens, which the next row may cut.
+    fn wall_vertex(&self, side: Side) -> Option<(i64, VertexOrigin)> {
+        let (k, poly) = match side {
+            Side::Left => self.lenses.iter().next()?,
+            _ => self.lenses.iter().next_back()?,
+        };
+        let v = if side == Side::Left {
+            poly[0]
+        } else {
+            *poly.last()?
+        };
+        Some((*k, self.origins[v as usize]))
+    }
+}
+
+/// Every base row, solved, with rows added where a wall's trim curve would
+/// be too coarse: the row heights and their vertices, bottom to top.
+pub(super) fn rows(
+    d: &Design,
+    plan: &MeshPlan,
+    progress: &dyn Progress,
+) -> Result<(Vec<f64>, Vec<BaseRow>)> {
+    let (xl, xr) = d.outline_x;
+    let base_columns = &plan.base_columns;
+    let mut base_rows = plan.base_rows.clone();
+    progress.stage("base vertices", base_rows.len() as u64);
+    let compute_rows = |ys: &[f64]| -> Result<Vec<BaseRow>> {
+        ys.par_iter()
+            .map(|&y| {
+                let row = base_row(d, base_columns, y, xl, xr);
+                progress.tick(1);
+                row
+            })
+            .collect()
+    };
+    let mut base_row_data = compute_rows(&base_rows)?;
+    // Where an x-wall cuts a base lens, the trim curve between two rows is
+    // one edge: refine until its cut moves by at most one column per strip,
+    // so the trim edge meets the same chordal bound as the lens columns.
+    for _pass in 0..8 {
+        let extra = trim_rows(&base_rows, &base_row_data, base_columns);
+        if extra.is_empty() {
+            break;
+        }
+        let new_rows = compute_rows(&extra)?;
+        let mut merged: Vec<(f64, BaseRow)> = base_rows
+            .drain(..)
+            .zip(base_row_data.drain(..))
+            .chain(extra.into_iter().zip(new_rows))
+            .collect();
+        merged.sort_by(|a, b| a.0.total_cmp(&b.0));
+        merged.dedup_by(|a, b| (a.0 - b.0).abs() < 1e-9);
+        for (y, row) in merged {
+            base_rows.push(y);
+            base_row_data.push(row);
+        }
+    }
+    Ok((base_rows, base_row_data))
+}
+
+/// Heights of the rows to add (sorted, distinct) so that, between two
+/// rows, the cut of a base lens by an x-wall moves by at most one column.
+fn trim_rows(
+    base_rows: &[f64],
+    base_row_data: &[BaseRow],
+    base_columns: &BTreeMap<i64, usize>,
+) -> Vec<f64> {
+    let mut extra = Vec::new();
+    for r in 0..base_rows.len() - 1 {
+        for side in [Side::Left, Side::Right] {
+            let (Some((ka, oa)), Some((kb, ob))) = (
+                base_row_data[r].wall_vertex(side),
+                base_row_data[r + 1].wall_vertex(side),
+            ) else {
+                continue;
+            };
+            // the lens both wall vertices lie on (a crease lies on two);
+            // none means a crease crosses between, and its row bounds the strip
+            let shared = [ka, kb].into_iter().find_map(|k| {
+                let lens = LensRef::Base(k);
+                Some((k, oa.params_on(lens)?.x, ob.params_on(lens)?.x))
+            });
+            let Some((k, ta, tb)) = shared else { continue };
+            let cols = base_columns.get(&k).copied().unwrap_or(2) as f64;
+            let pieces = ((ta - tb).abs() * cols).ceil() as usize;
+            for p in 1..pieces {
+                extra.push(
+                    base_rows[r] + (base_rows[r + 1] - base_rows[r]) * p as f64 / pieces as f64,
+                );
+            }
+        }
+    }
+    extra.sort_by(f64::total_cmp);
+    extra.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    extra
+}
+
+/// The base's triangles: each lens's strip between neighbouring rows,
+/// row pairs in parallel. `offsets[r]` is the index of row r's first vertex.
+pub(super) fn strips(
+    dm: &DeviceMesh,
+    base_rows: &[f64],
+    rows: &[BaseRow],
+    offsets: &[u32],
+) -> Result<Vec<Strip>> {
+    let key_t =
+        |o: &VertexOrigin, lens: LensRef| o.params_on(lens).map(|p| p.x).unwrap_or(f64::NAN);
+    (0..rows.len() - 1)
+        .into_par_iter()
+        .map(|r| {
+            let (ra, rb) = (&rows[r], &rows[r + 1]);
+            let (oa, ob) = (offsets[r], offsets[r + 1]);
+            let (mut t, mut p) = (Vec::new(), Vec::new());
+            let lenses: std::collections::BTreeSet<i64> =
+                ra.lenses.keys().chain(rb.lenses.keys()).cloned().collect();
+            for k in lenses {
+                let (a, b) = match (ra.lenses.get(&k), rb.lenses.get(&k)) {
+                    (Some(a), Some(b)) if a.len() > 1 || b.len() > 1 => (a, b),
+                    (Some(a), None) | (None, Some(a)) if a.len() > 1 => {
+                        return Err(KernelError::MeshCheck {
+                            name: "base-crossings",
+                            detail: format!("base lens {k} enters the outline between y = {} and {} without a crease crossing being found", base_rows[r], base_rows[r + 1]),
+                        })
+                    }
+                    _ => continue,
+                };
+                let a: Vec<u32> = a.iter().map(|i| i + oa).collect();
+                let b: Vec<u32> = b.iter().map(|i| i + ob).collect();
+                let lens = LensRef::Base(k);
+                zip(
+                    &a,
+                    &b,
+                    &|v| key_t(&dm.origins[v as usize], lens),
+                    true,
+                    Patch::Lens(lens),
+                    None,
+                    (&mut t, &mut p),
+                );
+            }
+            Ok((t, p))
+        })
+        .collect()
+}
+
+/// Computes one base row at exact height y: crease vertices, cut vertices on
+/// the x-walls and interior vertices, each solved onto its exact surface.
+fn base_row(
+    d: &Design,
+    columns: &BTreeMap<i64, usize>,
+    y: f64,
+    xl: f64,
+    xr: f64,
+) -> Result<BaseRow> {
+    let (k0, k1) = d.base_creases;
+    let creases = row_creases(d, y)?;
+    let crease = |k: i64| creases[(k - k0) as usize];
+    let mut row = BaseRow {
+        positions: Vec::new(),
+        origins: Vec::new(),
+        lenses: BTreeMap::new(),
+        ends: (u32::MAX, 0),
+    };
+    let mut crease_index: BTreeMap<i64, u32> = BTreeMap::new();
+    let push = |row: &mut BaseRow, p: DVec3, o: VertexOrigin| -> u32 {
+        row.positions.push(p);
+        row.origins.push(o);
+        (row.positions.len() - 1) as u32
+    };
+    let snap = |x: f64, wall: f64| (x - wall).abs() <= WALL_SNAP_MM;
+    for k in k0..k1 {
+        let (c0, c1) = (crease(k), crease(k + 1));
+        let (x0, x1) = (c0.1.x, c1.1.x);
+        let mut crease_vertex = |row: &mut BaseRow, kk: i64| -> u32 {
+            if let Some(&i) = crease_index.get(&kk) {
+                return i;
+            }
+            let (v, p) = crease(kk);
+            let i = push(row, p, VertexOrigin::BaseCrease { k: kk, v });
+            crease_index.insert(kk, i);
+            i
+        };
+        if x1 <= xl + WALL_SNAP_MM {
+            if snap(x1, xl) {
+                let i = crease_vertex(&mut row, k + 1);
+                row.lenses.insert(k, vec![i]);
+            }
+            continue;
+        }
+        if x0 >= xr - WALL_SNAP_MM {
+            if snap(x0, xr) {
+                let i = crease_vertex(&mut row, k);
+                row.lenses.insert(k, vec![i]);
+            }
+            continue;
+        }
+        let cols = *columns
+            .get(&k)
+            .ok_or_else(|| KernelError::Solver(format!("base lens {k} was not surveyed")))?;
+        let cut = |wall: f64, t0: f64| -> Result<(DVec3, VertexOrigin, f64)> {
+            let guess = DVec2::new(t0, 0.5 * (c0.0 + c1.0));
+            let p = newton_2d(
+                guess,
+                &|| format!("base lens {k} meeting the wall x = {wall} at y = {y}"),
+                |q| {
+                    d.base_point(k, q.x, q.y)
+                        .map(|p| DVec2::new(p.x - wall, p.y - y))
+                        .unwrap_or(DVec2::NAN)
+                },
+            )?;
+            let pt = d.base_point(k, p.x, p.y)?;
+            Ok((pt, VertexOrigin::BaseLens { k, t: p.x, v: p.y }, p.x))
+        };
+        let mut poly = Vec::with_capacity(cols + 1);
+        let t_lo = if x0 >= xl - WALL_SNAP_MM {
+            poly.push(crease_vertex(&mut row, k));
+            0.0
+        } else {
+            let (p, o, t) = cut(xl, (xl - x0) / (x1 - x0))?;
+            poly.push(push(&mut row, p, o));
+            t
+        };
+        let (right_cut, t_hi) = if x1 <= xr + WALL_SNAP_MM {
+            (None, 1.0)
+        } else {
+            let (p, o, t) = cut(xr, (xr - x0) / (x1 - x0))?;
+            (Some((p, o)), t)
+        };
+        for (p, o) in lens_interior(d, k, (c0.0, c1.0), cols, y, (t_lo, t_hi), poly.len() == 1)? {
+            poly.push(push(&mut row, p, o));
+        }
+        match right_cut {
+            None => poly.push(crease_vertex(&mut row, k + 1)),
+            Some((p, o)) => poly.push(push(&mut row, p, o)),
+        }
+        row.ends.0 = row.ends.0.min(poly[0]);
+        row.ends.1 = row.ends.1.max(*poly.last().unwrap());
+        row.lenses.insert(k, poly);
+    }
+    if row.ends.0 == u32::MAX {
+        return Err(KernelError::MeshCheck {
+            name: "base-row",
+            detail: format!("no base lens lies inside the outline at y = {y}"),
+        });
+    }
+    // vertices were pushed left to right, so the row's span is ends.0..=ends.1
+    Ok(row)
+}
+
+/// The base creases k0..=k1 at height y: each one's station and point,
+/// solved onto the row.
+fn row_creases(d: &Design, y: f64) -> Result<Vec<(f64, DVec3)>> {
+    // crease vertices (k0..=k1), solved to lie at height y; neighbouring
+    // creases have nearly the same station, so each starts from the last,
+    // with its layout u predicted from the last solve
+    let (k0, k1) = d.base_creases;
+    let mut creases: Vec<(f64, DVec3)> = Vec::with_capacity((k1 - k0 + 1) as usize);
+    let mut v_guess = y;
+    let mut slope = None;
+    for k in k0..=k1 {
+        let mut u_near = None;
+        let point = |v: f64, near: Option<f64>| -> Result<(DVec3, f64)> {
+            let u = d.base_crease_u_near(k, v, near)?;
+            Ok((d.base_surface(u, v), u))
+        };
+        let mut v = v_guess;
+        let mut found = None;
+        for _ in 0..40 {
+            let (p, u) = point(v, u_near)?;
+            u_near = Some(u);
+            let r = p.y - y;
+            if r.abs() <= SOLVE_RESIDUAL_MM {
+                found = Some(p);
+                break;
+            }
+            let dydv = match slope {
+                Some(s) => s,
+                None => {
+                    let h = 1e-6;
+                    let s = (point(v + h, u_near)?.0.y - point(v - h, u_near)?.0.y) / (2.0 * h);
+                    slope = Some(s);
+                    s
+                }
+            };
+            v -= r / dydv;
+        }
+        let p = found.ok_or_else(|| KernelError::Solver(format!("base crease {k} at y = {y}")))?;
+        v_guess = v;
+        creases.push((v, p));
+    }
+    Ok(creases)
+}
+
+/// The interior vertices of base lens k on the row at height y, left to
+/// right: its columns between the parameters `t_lo` and `t_hi` of its
+/// ends on this row (a crease or a wall cut), whose creases lie at
+/// stations `v0` and `v1`. `only_one`: the lens has a single vertex so far.
+fn lens_interior(
+    d: &Design,
+    k: i64,
+    (v0, v1): (f64, f64),
+    cols: usize,
+    y: f64,
+    (t_lo, t_hi): (f64, f64),
+    only_one: bool,
+) -> Result<Vec<(DVec3, VertexOrigin)>> {
+    // An interior vertex is on its exact surface at whatever station it is
+    // evaluated; the residual only says how far it is from its row's plane.
+    // That must be round-off on the wall rows y = ±H/2, while elsewhere a
+    // nanometre changes nothing.
+    let on_wall = y.abs() == d.half_height;
+    let row_residual = if on_wall {
+        SOLVE_RESIDUAL_MM
+    } else {
+        INTERIOR_ROW_RESIDUAL_MM
+    };
+    // Columns closer than this to a cut are dropped (no slivers); the span
+    // next to a cut is then at most 1.1 columns.
+    let margin = 0.1 / cols as f64;
+    // Interior vertices: solve the station v at which (t, v) has height y.
+    // Three exact arcs around the middle station give, per column, a
+    // quadratic model of y(v) that starts Newton within ~1e-8 mm, and a
+    // linear predictor of the crease positions that warm-starts every
+    // crease solve; then exact Newton steps to the solver residual.
+    let mut out = Vec::new();
+    if only_one || t_hi - t_lo > 2.0 * margin {
+        let vm = 0.5 * (v0 + v1);
+        let hq = 0.05f64.min(d.params.period);
+        let (am, u0m, u1m) = d.base_section_and_creases(k, vm, (None, None))?;
+        let (ap, u0p, u1p) = d.base_section_and_creases(k, vm + hq, (Some(u0m), Some(u1m)))?;
+        let (an, u0n, u1n) = d.base_section_and_creases(k, vm - hq, (Some(u0m), Some(u1m)))?;
+        let (du0, du1) = ((u0p - u0n) / (2.0 * hq), (u1p - u1n) / (2.0 * hq));
+        let predict = |v: f64| (Some(u0m + du0 * (v - vm)), Some(u1m + du1 * (v - vm)));
+        for j in 1..cols {
+            let t = j as f64 / cols as f64;
+            if t <= t_lo + margin || t >= t_hi - margin {
+                continue;
+            }
+            let (yn, y0, yp) = (an.point(t).y, am.point(t).y, ap.point(t).y);
+            let (jm, km) = ((yp - yn) / (2.0 * hq), (yp - 2.0 * y0 + yn) / (hq * hq));
+            let mut dv = (y - y0) / jm;
+            for _ in 0..3 {
+                dv -= (y0 + jm * dv + 0.5 * km * dv * dv - y) / (jm + km * dv);
+            }
+            let mut v = vm + dv;
+            let mut found = None;
+            for _ in 0..12 {
+                let p = d.base_section_near(k, v, predict(v))?.point(t);
+                let r = p.y - y;
+                if r.abs() <= row_residual {
+                    found = Some(p);
+                    break;
+                }
+                v -= r / (jm + km * (v - vm));
+            }
+            let p = found.ok_or_else(|| {
+                KernelError::Solver(format!("base lens {k} at t = {t}, y = {y}"))
+            })?;
+            out.push((p, VertexOrigin::BaseLens { k, t, v }));
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,401 @@
+//! Planning the mesh: a curvature survey of every lens (pure and twist
+//! terms against a split of the tolerance) gives each lens its columns and
+//! the rows their stations; base rows are added where a base crease crosses
+//! an x-wall, so those corners are exact.
+
+use crate::design::Design;
+use crate::error::Result;
+use crate::model::BaseSection;
+use crate::progress::Progress;
+use crate::solve::bracketed_secant;
+use crate::tolerance::WALL_SNAP_MM;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+
+/// Share of the tolerance given to the chordal error across a lens.
+pub(super) const ACROSS_SHARE: f64 = 0.45;
+/// Share of the tolerance given to the chordal error along a lens. The two
+/// add at most at a triangle's interior; the rest is margin for the twist.
+pub(super) const ALONG_SHARE: f64 = 0.4;
+/// Cells of the curvature survey along y.
+const SURVEY_CELLS: usize = 256;
+
+/// Where the rows and columns go.
+pub(super) struct MeshPlan {
+    /// Columns per revealer lens.
+    pub revealer_columns: Vec<usize>,
+    /// Revealer row stations (the first and last are solved onto y = ±H/2).
+    pub revealer_rows: Vec<f64>,
+    /// Largest effective curvature along the revealer lenses (1/mm).
+    pub revealer_kmax: f64,
+    /// Columns per base lens (lenses entirely outside the outline included).
+    pub base_columns: BTreeMap<i64, usize>,
+    /// Base row heights y, crossing rows included.
+    pub base_rows: Vec<f64>,
+    /// Rows a uniform base grid would need for the same tolerance.
+    pub uniform_base_rows: usize,
+    /// Rows placed where a base crease crosses an x-wall.
+    pub crossing_rows: usize,
+}
+
+/// Surveys every lens and plans the rows and columns of `design`'s mesh.
+pub(super) fn plan(design: &Design, progress: &dyn Progress) -> Result<MeshPlan> {
+    let planner = Planner { design };
+    let hh = design.half_height;
+    progress.stage("surveying curvature", 2);
+    let (revealer_columns, revealer_rows, revealer_kmax) = planner.revealer_plan();
+    progress.tick(1);
+    let (base_columns, base_k, crease_samples) = planner.base_survey()?;
+    progress.tick(1);
+    let mut base_rows = rows_from_curvature(-hh, hh, &base_k, ALONG_SHARE * planner.tol(), 1);
+    let uniform_base_rows = {
+        let kmax = base_k.iter().cloned().fold(0.0, f64::max);
+        ((2.0 * hh) * (kmax / (8.0 * ALONG_SHARE * planner.tol())).sqrt())
+            .ceil()
+            .max(1.0) as usize
+    };
+    let crossings = planner.crossings(&crease_samples)?;
+    insert_rows(&mut base_rows, &crossings);
+    Ok(MeshPlan {
+        revealer_columns,
+        revealer_rows,
+        revealer_kmax,
+        base_columns,
+        base_rows,
+        uniform_base_rows,
+        crossing_rows: crossings.len(),
+    })
+}
+
+/// Rows between `lo` and `hi` (both included) such that a segment through
+/// cell c with second derivative K[c] has chordal error ≤ e: equidistributes
+/// √(K/8e) (rows per mm), with at least `min_segments` segments. `k` holds
+/// one value per cell of a uniform grid.
+fn rows_from_curvature(lo: f64, hi: f64, k: &[f64], e: f64, min_segments: usize) -> Vec<f64> {
+    let cells = k.len();
+    let h = (hi - lo) / cells as f64;
+    // a cell's density uses the worst of itself and its neighbours
+    let density: Vec<f64> = (0..cells)
+        .map(|c| {
+            let kk = k[c.saturating_sub(1)]
+                .max(k[c])
+                .max(k[(c + 1).min(cells - 1)]);
+            (kk / (8.0 * e)).sqrt()
+        })
+        .collect();
+    let mut cum = vec![0.0; cells + 1];
+    for c in 0..cells {
+        cum[c + 1] = cum[c] + density[c] * h;
+    }
+    let mut total = cum[cells];
+    let n = (total.ceil() as usize).max(min_segments).max(1);
+    if total == 0.0 {
+        // flat: spread the minimum rows evenly
+        for (c, v) in cum.iter_mut().enumerate() {
+            *v = c as f64 * h;
+        }
+        total = cum[cells];
+    }
+    let mut rows = Vec::with_capacity(n + 1);
+    rows.push(lo);
+    let mut c = 0;
+    for r in 1..n {
+        let target = total * r as f64 / n as f64;
+        while cum[c + 1] < target {
+            c += 1;
+        }
+        let step = cum[c + 1] - cum[c];
+        let frac = if step > 0.0 {
+            (target - cum[c]) / step
+        } else {
+            0.0
+        };
+        rows.push(lo + (c as f64 + frac) * h);
+    }
+    rows.push(hi);
+    rows.dedup_by(|a, b| *a <= *b);
+    rows
+}
+
+/// What the survey of one lens found.
+struct LensSurvey {
+    columns: usize,
+    /// Effective curvature along the lens at each station (1/mm).
+    k_eff: Vec<f64>,
+    /// y of the lens's first crease at each station.
+    ys: Vec<f64>,
+    /// The first crease point at each station.
+    first: Vec<DVec3>,
+}
+
+struct Planner<'a> {
+    design: &'a Design,
+}
+
+impl<'a> Planner<'a> {
+    fn tol(&self) -> f64 {
+        self.design.tolerance.mm()
+    }
+
+    /// Survey stations: uniform over [−H/2 − pad, H/2 + pad].
+    fn survey_stations(&self, pad: f64) -> (Vec<f64>, f64) {
+        let hh = self.design.half_height + pad;
+        let h = 2.0 * hh / SURVEY_CELLS as f64;
+        ((0..=SURVEY_CELLS).map(|s| -hh + s as f64 * h).collect(), h)
+    }
+
+    /// Surveys one lens from its station arcs: the columns that meet the
+    /// across share of the tolerance at every station, and per station the
+    /// effective curvature along the lens, K_eff = 8·e / Δv², where Δv is the
+    /// largest row spacing with K_vv·Δv² + 2·Δt·K_tv·Δv ≤ 8·e (the pure and
+    /// twist terms of a triangle's interpolation error; Δt = 1/columns).
+    fn survey_lens(&self, sections: &[BaseSection], h: f64) -> LensSurvey {
+        const TS: usize = 9;
+        let e_along = ALONG_SHARE * self.tol();
+        let mut columns = 1;
+        let pts: Vec<[DVec3; TS]> = sections
+            .iter()
+            .map(|section| {
+                columns = columns.max(section.columns(ACROSS_SHARE * self.tol()));
+                std::array::from_fn(|j| section.point(j as f64 / (TS - 1) as f64))
+            })
+            .collect();
+        let dt = 1.0 / columns as f64;
+        let n = pts.len();
+        let mut k_eff = vec![0.0; n];
+        for s in 1..n - 1 {
+            let mut worst = 0.0f64;
+            for j in 0..TS {
+                let kvv = (pts[s - 1][j] - 2.0 * pts[s][j] + pts[s + 1][j]).length() / (h * h);
+                let (ja, jb) = (j.saturating_sub(1), (j + 1).min(TS - 1));
+                let ktv = ((pts[s + 1][jb] - pts[s - 1][jb]) - (pts[s + 1][ja] - pts[s - 1][ja]))
+                    .length()
+                    / (2.0 * h * (jb - ja) as f64 / (TS - 1) as f64);
+                // largest Δv with kvv Δv² + 2 dt ktv Δv = 8 e
+                let b = dt * ktv;
+                let dv = if kvv > 0.0 {
+                    (-b + (b * b + 8.0 * kvv * e_along).sqrt()) / kvv
+                } else if b > 0.0 {
+                    4.0 * e_along / b
+                } else {
+                    f64::INFINITY
+                };
+                worst = worst.max(8.0 * e_along / (dv * dv));
+            }
+            k_eff[s] = worst;
+        }
+        if n > 2 {
+            k_eff[0] = k_eff[1];
+            k_eff[n - 1] = k_eff[n - 2];
+        }
+        LensSurvey {
+            columns,
+            k_eff,
+            ys: pts.iter().map(|p| p[0].y).collect(),
+            first: pts.iter().map(|p| p[0]).collect(),
+        }
+    }
+
+    /// Revealer: columns per lens, and rows (stations).
+    fn revealer_plan(&self) -> (Vec<usize>, Vec<f64>, f64) {
+        let d = self.design;
+        let (stations, h) = self.survey_stations(0.0);
+        let surveys: Vec<LensSurvey> = (0..d.lenses as i64)
+            .into_par_iter()
+            .map(|i| {
+                let arcs: Vec<BaseSection> = stations
+                    .iter()
+                    .map(|&v| BaseSection::Lens(d.revealer_arc(i, v)))
+                    .collect();
+                self.survey_lens(&arcs, h)
+            })
+            .collect();
+        let columns: Vec<usize> = surveys.iter().map(|s| s.columns).collect();
+        let k: Vec<f64> = (0..SURVEY_CELLS)
+            .map(|c| {
+                surveys
+                    .iter()
+                    .map(|s| s.k_eff[c].max(s.k_eff[c + 1]))
+                    .fold(0.0, f64::max)
+            })
+            .collect();
+        let kmax = k.iter().cloned().fold(0.0, f64::max);
+        // At least one interior station row, so every lens has an exact arc
+        // in the mesh to measure.
+        let rows = rows_from_curvature(
+            -d.half_height,
+            d.half_height,
+            &k,
+            ALONG_SHARE * self.tol(),
+            2,
+        );
+        (columns, rows, kmax)
+    }
+
+    /// Base: columns per lens, effective curvature per y-cell, and crease
+    /// samples for finding crossings with the x-walls.
+    #[allow(clippy::type_complexity)]
+    fn base_survey(
+        &self,
+    ) -> Result<(
+        BTreeMap<i64, usize>,
+        Vec<f64>,
+        Vec<(i64, Vec<(f64, DVec3)>)>,
+    )> {
+        let d = self.design;
+        let pad = d.margin.min(d.half_height);
+        let (stations, h) = self.survey_stations(pad);
+        let (xl, xr) = d.outline_x;
+        let hh = d.half_height;
+        let (k0, k1) = d.base_creases;
+        let cell_of = |y: f64| {
+            (((y + hh) / (2.0 * hh) * SURVEY_CELLS as f64).floor() as isize)
+                .clamp(0, SURVEY_CELLS as isize - 1) as usize
+        };
+        // every crease once per station (two lenses share it), each solve
+        // starting from the crease's last
+        let crease_u: Vec<Vec<f64>> = (k0..=k1)
+            .into_par_iter()
+            .map(|c| {
+                let mut near = None;
+                stations
+                    .iter()
+                    .map(|&v| {
+                        let u = d.base_crease_u_near(c, v, near)?;
+                        near = Some(u);
+                        Ok(u)
+                    })
+                    .collect()
+            })
+            .collect::<Result<_>>()?;
+        let surveys: Vec<(i64, LensSurvey)> = (k0..k1)
+            .into_par_iter()
+            .map(|k| {
+                let (u0, u1) = (
+                    &crease_u[(k - k0) as usize],
+                    &crease_u[(k - k0 + 1) as usize],
+                );
+                let arcs: Vec<BaseSection> = stations
+                    .iter()
+                    .enumerate()
+                    .map(|(s, &v)| d.base_section_between(u0[s], u1[s], v))
+                    .collect();
+                (k, self.survey_lens(&arcs, h))
+            })
+            .collect();
+        let mut columns = BTreeMap::new();
+        let mut kcell = vec![0.0f64; SURVEY_CELLS];
+        let mut creases = Vec::new();
+        for (k, s) in &surveys {
+            columns.insert(*k, s.columns);
+            for (idx, (&y, p)) in s.ys.iter().zip(&s.first).enumerate() {
+                let inside = p.x >= xl - d.params.period * 10.0
+                    && p.x <= xr + d.params.period * 10.0
+                    && y.abs() <= hh + h;
+                if inside {
+                    let c = cell_of(y);
+                    kcell[c] = kcell[c].max(s.k_eff[idx]);
+                }
+            }
+            creases.push((
+                *k,
+                stations
+                    .iter()
+                    .cloned()
+                    .zip(s.first.iter().cloned())
+                    .collect(),
+            ));
+        }
+        // the last crease k1 bounds lens k1 − 1
+        let last = stations
+            .iter()
+            .map(|&v| Ok((v, d.base_crease_point(k1, v)?)))
+            .collect::<Result<Vec<_>>>()?;
+        creases.push((k1, last));
+        Ok((columns, kcell, creases))
+    }
+
+    /// Exact y-values where a base crease crosses an x-wall.
+    fn crossings(&self, creases: &[(i64, Vec<(f64, DVec3)>)]) -> Result<Vec<f64>> {
+        let d = self.design;
+        let hh = d.half_height;
+        let mut ys = Vec::new();
+        for (k, samples) in creases {
+            for wall in [d.outline_x.0, d.outline_x.1] {
+                // Samples are inside, outside, or within the snap band of the
+                // wall. A crossing is a move from clearly inside to clearly
+                // outside (or back), possibly through band samples; a crease
+                // that only touches the band (a tangential touch) needs no row.
+                let mut last: Option<(f64, f64)> = None; // (v, signed distance) of the last clear sample
+                for &(v, p) in samples {
+                    let s = p.x - wall;
+                    if s.abs() <= WALL_SNAP_MM {
+                        continue;
+                    }
+                    if let Some((v0, s0)) = last {
+                        if (s0 > 0.0) != (s > 0.0) {
+                            // the root bracketed by these two samples, not another one
+                            let root = bracketed_secant(
+                                v0,
+                                v,
+                                &|| format!("base crease {k} meeting the wall x = {wall}"),
+                                |v| {
+                                    d.base_crease_point(*k, v)
+                                        .map(|p| p.x - wall)
+                                        .unwrap_or(f64::NAN)
+                                },
+                            )?;
+                            let y = d.base_crease_point(*k, root)?.y;
+                            if y > -hh && y < hh {
+                                ys.push(y);
+                            }
+                        }
+                    }
+                    last = Some((v, s));
+                }
+            }
+        }
+        ys.sort_by(f64::total_cmp);
+        Ok(ys)
+    }
+}
+
+/// Inserts crossing rows into `rows` (sorted, boundaries first and last).
+/// A crossing close to a free interior row replaces it, so no sliver strips
+/// appear; boundary rows and crossings already placed are never moved.
+fn insert_rows(rows: &mut Vec<f64>, crossings: &[f64]) {
+    let mut pinned = vec![false; rows.len()];
+    pinned[0] = true;
+    *pinned.last_mut().unwrap() = true;
+    for &y in crossings {
+        let pos = rows.partition_point(|&r| r < y);
+        let (lo, hi) = (rows[pos - 1], rows[pos.min(rows.len() - 1)]);
+        let gap = hi - lo;
+        if (y - lo).abs() < 1e-9 || (hi - y).abs() < 1e-9 {
+            continue;
+        }
+        if !pinned[pos - 1] && y - lo < 0.1 * gap {
+            rows[pos - 1] = y;
+            pinned[pos - 1] = true;
+        } else if !pinned[pos] && hi - y < 0.1 * gap {
+            rows[pos] = y;
+            pinned[pos] = true;
+        } else {
+            rows.insert(pos, y);
+            pinned.insert(pos, true);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::insert_rows;
+
+    #[test]
+    fn crossing_rows_are_never_moved() {
+        let mut rows = vec![-1.0, 0.0, 1.0];
+        insert_rows(&mut rows, &[0.05, 0.09, -0.5]);
+        assert_eq!(rows, vec![-1.0, -0.5, 0.05, 0.09, 1.0]);
+    }
+}

@@ -1,0 +1,64 @@
+//! The four vertical side walls (METHOD §5.3): planar strips zipped
+//! between the device's top and bottom boundary polylines, which are the
+//! revealer's and the base's own boundary vertices.
+
+use super::base::BaseRow;
+use super::zip::{zip, Strip};
+use crate::device_mesh::{DeviceMesh, Patch, Side};
+use glam::DVec3;
+
+/// The walls' triangles, in the order left, right, front, back.
+pub(super) fn strips(dm: &DeviceMesh, base_rows: &[BaseRow], base_offsets: &[u32]) -> Strip {
+    let (mut tris, mut patches) = (Vec::new(), Vec::new());
+    let pos = &dm.mesh.positions;
+    let key_x = |v: u32| pos[v as usize].x;
+    let key_y = |v: u32| pos[v as usize].y;
+    let last_row = dm.revealer_rows.len() - 1;
+    let n = dm.revealer_columns.len();
+    let row_len = dm.revealer_row_len();
+    let left_top: Vec<u32> = (0..=last_row)
+        .map(|r| dm.revealer_vertex(r, 0, 0))
+        .collect();
+    let right_top: Vec<u32> = (0..=last_row)
+        .map(|r| dm.revealer_vertex(r, n - 1, dm.revealer_columns[n - 1]))
+        .collect();
+    let left_bottom: Vec<u32> = base_rows
+        .iter()
+        .zip(base_offsets)
+        .map(|(row, o)| row.ends.0 + o)
+        .collect();
+    let right_bottom: Vec<u32> = base_rows
+        .iter()
+        .zip(base_offsets)
+        .map(|(row, o)| row.ends.1 + o)
+        .collect();
+    let front_top: Vec<u32> = (0..row_len as u32).collect();
+    let back_top: Vec<u32> = (0..row_len as u32)
+        .map(|c| c + (last_row * row_len) as u32)
+        .collect();
+    let row_span = |r: usize| {
+        let row = &base_rows[r];
+        (row.ends.0..=row.ends.1)
+            .map(|i| i + base_offsets[r])
+            .collect::<Vec<u32>>()
+    };
+    let front_bottom = row_span(0);
+    let back_bottom = row_span(base_rows.len() - 1);
+    for (bottom, top, key, flip, side, outward) in [
+        (&left_bottom, &left_top, &key_y as &dyn Fn(u32) -> f64, true, Side::Left, DVec3::NEG_X),
+        (&right_bottom, &right_top, &key_y, false, Side::Right, DVec3::X),
+        (&front_bottom, &front_top, &key_x, false, Side::Front, DVec3::NEG_Y),
+        (&back_bottom, &back_top, &key_x, true, Side::Back, DVec3::Y),
+    ] {
+        zip(
+            bottom,
+            top,
+            key,
+            flip,
+            Patch::Wall(side),
+            Some((pos, outward)),
+            (&mut tris, &mut patches),
+        );
+    }
+    (tris, patches)
+}
