@@ -2,7 +2,7 @@
 //! the clear body and the black bands as two STLs and one 3MF, checked
 //! before anything is written.
 
-use crate::report::{self, FileReport};
+use crate::report::{self, DutyReport, FileReport, PrintedBrepReport, PrintedReport};
 use crate::{
     commit_with_report, measure_device, refuse_failed, DeviceBuild, DeviceOutcome, StepFile,
     Thoroughness,
@@ -15,7 +15,6 @@ use moirecast_kernel::printed::{duty_along_lines, printed_bodies, LineDuty, Prin
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{BaseKind, Design, PrintedBase};
 use moirecast_spec::Spec;
-use serde::Serialize;
 use std::path::Path;
 
 /// Sample lines for the duty cycle along lines.
@@ -34,61 +33,6 @@ pub const BLACK: Material = Material {
     name: "black",
     display_color: [0x10, 0x10, 0x10, 0xFF],
 };
-
-/// The printed device's numbers in `report.json`.
-#[derive(Serialize, Clone, Debug)]
-pub struct PrintedReport {
-    /// Band shells in `device-black.stl`.
-    pub bands: u32,
-    /// Through-holes of `device-clear.stl` (bands that tunnel through it).
-    pub clear_genus: u32,
-    pub clear_volume_mm3: f64,
-    pub black_volume_mm3: f64,
-    /// The whole device (clear and black together) as one solid.
-    pub device_volume_mm3: f64,
-    /// The band layer: the outline's area of s times t_b.
-    pub band_layer_volume_mm3: f64,
-    pub duty: DutyReport,
-    /// Places where a band edge touched a side wall without crossing it,
-    /// and how far closing each pinch moved the band's outline (mm; at
-    /// most the tolerance).
-    pub wall_touches: usize,
-    pub wall_touch_shift_mm: f64,
-    /// The bodies as B-rep solids in `device-clear.step` and
-    /// `device-black.step` (once written).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub brep: Option<PrintedBrepReport>,
-}
-
-/// The printed bodies' B-rep and STEP files.
-#[derive(Serialize, Clone, Debug)]
-pub struct PrintedBrepReport {
-    pub clear_step_bytes: usize,
-    pub black_step_bytes: usize,
-    #[serde(flatten)]
-    pub stats: moirecast_brep::PrintedBrepStats,
-}
-
-/// The duty cycle, asked and measured two ways on the output. These are
-/// measurements, not checks: the invariant is that band edges lie on
-/// φ ∈ ℤ and φ ∈ ℤ + duty (`base-creases-follow-shift`, to 1e-8 periods).
-/// Where the elevation bends within a period, a band's share of its period
-/// in x departs from its share in φ: by 0.1 % on the shipped example, by
-/// 1.5 % on a 4 mm design with a 1.5 mm bump.
-#[derive(Serialize, Clone, Debug)]
-pub struct DutyReport {
-    pub asked: f64,
-    /// Black volume / band-layer volume over whole periods (the walls cut
-    /// the first and last period of each line anywhere).
-    pub by_volume: f64,
-    /// The same over the whole layer, partial periods at the walls included.
-    pub by_volume_whole_layer: f64,
-    /// Black share along lines y = const over whole periods.
-    pub along_lines: f64,
-    pub worst_line_deviation: f64,
-    pub lines: usize,
-    pub periods: usize,
-}
 
 /// The two bodies of a printed design, with what was measured of them
 /// (their solid checks come with [`PrintedBuild::solids`]).
