@@ -117,6 +117,71 @@ impl Survey {
         Survey { points }
     }
 
+    /// The plateaus of local maxima (nodes no neighbour exceeds, joined
+    /// where they tie), each as its nodes (i, j), in scan order.
+    fn plateaus(&self) -> Vec<Vec<(usize, usize)>> {
+        let n = SURVEY_NODES;
+        let z = |i: usize, j: usize| self.points[j][i].z;
+        let span_z = {
+            let all = self.points.iter().flatten().map(|q| q.z);
+            let (a, b) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), z| {
+                (a.min(z), b.max(z))
+            });
+            b - a
+        };
+        let tie = 1e-9 * (1.0 + span_z);
+        let neighbours = |i: usize, j: usize| {
+            let mut out = Vec::with_capacity(8);
+            for dj in -1i64..=1 {
+                for di in -1i64..=1 {
+                    let (ni, nj) = (i as i64 + di, j as i64 + dj);
+                    if (di, dj) != (0, 0)
+                        && ni >= 0
+                        && nj >= 0
+                        && (ni as usize) < n
+                        && (nj as usize) < n
+                    {
+                        out.push((ni as usize, nj as usize));
+                    }
+                }
+            }
+            out
+        };
+        let is_max = |i: usize, j: usize| {
+            neighbours(i, j)
+                .iter()
+                .all(|&(a, b)| z(a, b) <= z(i, j) + tie)
+        };
+        let mut component = vec![usize::MAX; n * n];
+        let mut plateaus: Vec<Vec<(usize, usize)>> = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                if component[j * n + i] != usize::MAX || !is_max(i, j) {
+                    continue;
+                }
+                let id = plateaus.len();
+                let mut members = vec![(i, j)];
+                component[j * n + i] = id;
+                let mut k = 0;
+                while k < members.len() {
+                    let (a, b) = members[k];
+                    for (c, d) in neighbours(a, b) {
+                        if component[d * n + c] == usize::MAX
+                            && (z(c, d) - z(a, b)).abs() <= tie
+                            && is_max(c, d)
+                        {
+                            component[d * n + c] = id;
+                            members.push((c, d));
+                        }
+                    }
+                    k += 1;
+                }
+                plateaus.push(members);
+            }
+        }
+        plateaus
+    }
+
     /// The wall a border node lies on (corners: None).
     fn border(&self, i: usize, j: usize) -> Option<Option<Wall>> {
         let last = SURVEY_NODES - 1;
@@ -151,7 +216,9 @@ impl Survey {
     }
 }
 
-/// Places and checks every feature.
+/// Places and checks every feature: the keys at the skirt's corners, the
+/// gate at the mid-wall curve's lowest point with its runner and sprue,
+/// a vent at each of the ceiling's maxima, and the optional bolts.
 pub fn place(
     design: &Design,
     device: &PosedDevice,
@@ -163,14 +230,24 @@ pub fn place(
     let outline = device.outline;
     let (lo, hi) = device.mesh.bounds();
     let tw = p.wall_thickness;
-    let block_lo =
-        crate::boolean::f32_exact(DVec3::new(outline.x0 - tw, outline.y0 - tw, lo.z - tw));
-    let block_hi =
-        crate::boolean::f32_exact(DVec3::new(outline.x1 + tw, outline.y1 + tw, hi.z + tw));
-    let block = outline.grown(tw);
-    let curve = |w: Wall| walls.iter().find(|c| c.wall == w).expect("four walls");
-    let mut warnings = Vec::new();
-
+    let site = Site {
+        outline,
+        block: outline.grown(tw),
+        block_lo: crate::boolean::f32_exact(DVec3::new(
+            outline.x0 - tw,
+            outline.y0 - tw,
+            lo.z - tw,
+        )),
+        block_hi: crate::boolean::f32_exact(DVec3::new(
+            outline.x1 + tw,
+            outline.y1 + tw,
+            hi.z + tw,
+        )),
+        device_top: hi.z,
+        walls,
+        p,
+        socket_r: p.key_diameter / 2.0 + p.key_clearance,
+    };
     // Ceiling (the crease surface under the top half) and the smooth mid
     // surface, free of the ripple of single lenses.
     let revealer = |u: f64, v: f64| design.surface().point(u, v);
@@ -182,420 +259,435 @@ pub fn place(
     };
     let mid = Survey::new(design, device, |u, v| 0.5 * (revealer(u, v) + base(u, v)));
 
-    // --- Keys, at the middle of each corner square of the skirt.
-    let socket_r = p.key_diameter / 2.0 + p.key_clearance;
-    let corner_mid = |w: Wall, end: bool| {
-        let c = &curve(w).mid;
-        if end {
-            *c.z.last().unwrap()
-        } else {
-            c.z[0]
-        }
+    let keys = site.keys()?;
+    let gate = site.gate(&mid)?;
+    let mut warnings = Vec::new();
+    let vents = site.vents(&ceiling, &gate, (upper, lower), &mut warnings)?;
+    site.check_columns(&vents, &gate, &keys)?;
+    let bolts = if p.bolts {
+        site.bolts(&keys, &gate, &vents)?
+    } else {
+        Vec::new()
     };
-    let keys: Vec<Key> = [
-        (
-            DVec2::new(outline.x0 - tw / 2.0, outline.y0 - tw / 2.0),
-            corner_mid(Wall::YMin, false),
-        ),
-        (
-            DVec2::new(outline.x1 + tw / 2.0, outline.y0 - tw / 2.0),
-            corner_mid(Wall::YMin, true),
-        ),
-        (
-            DVec2::new(outline.x1 + tw / 2.0, outline.y1 + tw / 2.0),
-            corner_mid(Wall::YMax, true),
-        ),
-        (
-            DVec2::new(outline.x0 - tw / 2.0, outline.y1 + tw / 2.0),
-            corner_mid(Wall::YMax, false),
-        ),
-    ]
-    .into_iter()
-    .map(|(xy, z)| Key { at: xy.extend(z) })
-    .collect();
+    Ok(Features {
+        block_lo: site.block_lo,
+        block_hi: site.block_hi,
+        gate,
+        vents,
+        keys,
+        bolts,
+        warnings,
+    })
+}
 
-    // Keys must stay clear of the cavity, the outside and the block faces.
-    for k in &keys {
-        let xy = k.at.truncate();
-        let to_cavity = outline.signed_distance(xy) - socket_r;
-        let to_outside = -block.signed_distance(xy) - socket_r;
-        if to_cavity < MIN_WALL_MM || to_outside < MIN_WALL_MM {
-            return Err(misfit(
-                "keys-clear-cavity",
-                Some(MoldParam::KeyDiameter),
-                k.at,
-                format!(
-                    "a key socket {:.1} mm wide here comes {:.2} mm from the cavity and {:.2} mm from the block's side (at least {MIN_WALL_MM} mm needed)",
-                    2.0 * socket_r,
-                    to_cavity,
-                    to_outside
-                ),
-                format!(
-                    "make mold.key_diameter at most {:.1} mm or mold.wall_thickness larger",
-                    (tw - 2.0 * MIN_WALL_MM - 2.0 * p.key_clearance).max(0.0)
-                ),
-            ));
-        }
-        let socket_top = k.at.z + p.key_height + p.key_clearance;
-        let bump_bottom = k.at.z - 0.5 * p.key_height;
-        if block_hi.z - socket_top < MIN_WALL_MM || bump_bottom - block_lo.z < MIN_WALL_MM {
-            return Err(misfit(
-                "keys-clear-cavity",
-                Some(MoldParam::KeyHeight),
-                k.at,
-                "the key is too tall for the block's height here".into(),
-                "make mold.key_height smaller or mold.wall_thickness larger".into(),
-            ));
-        }
+/// What every placement needs: the outline, the block and the walls.
+struct Site<'a> {
+    outline: Rect,
+    /// The block's footprint.
+    block: Rect,
+    block_lo: DVec3,
+    block_hi: DVec3,
+    /// The highest point of the posed device.
+    device_top: f64,
+    walls: &'a [WallCurves],
+    p: &'a MoldParams,
+    /// A key socket's radius, clearance included.
+    socket_r: f64,
+}
+
+impl Site<'_> {
+    fn curve(&self, w: Wall) -> &WallCurves {
+        self.walls.iter().find(|c| c.wall == w).expect("four walls")
     }
 
-    // --- Gate: the lowest point of the smooth mid-wall curve, away from the
-    // corners (where the keys are). Ties go to the point nearest a wall's middle.
-    let (r_g, r_s, r_c) = (
-        p.gate_diameter / 2.0,
-        p.sprue_diameter / 2.0,
-        p.pour_cone_diameter / 2.0,
-    );
-    let keepout = (r_c + socket_r + MIN_WALL_MM - tw / 2.0).max(r_g + MIN_WALL_MM);
-    let n = SURVEY_NODES;
-    let mut best: Option<(f64, f64, Wall, f64)> = None; // (z, distance to wall middle, wall, t)
-    for j in 0..n {
-        for i in 0..n {
-            let Some(Some(wall)) = mid.border(i, j) else {
-                continue;
-            };
-            let q = mid.points[j][i];
-            let (s0, s1) = wall.span(&outline);
-            let t = wall.along(q).clamp(s0, s1);
-            if t < s0 + keepout || t > s1 - keepout {
-                continue;
+    /// The keys, at the middle of each corner square of the skirt, clear
+    /// of the cavity, the outside and the block's faces.
+    fn keys(&self) -> Result<Vec<Key>> {
+        let (outline, block, p) = (self.outline, self.block, self.p);
+        let (tw, socket_r) = (p.wall_thickness, self.socket_r);
+        let (block_lo, block_hi) = (self.block_lo, self.block_hi);
+        let corner_mid = |w: Wall, end: bool| {
+            let c = &self.curve(w).mid;
+            if end {
+                *c.z.last().unwrap()
+            } else {
+                c.z[0]
             }
-            let key = (q.z, (t - 0.5 * (s0 + s1)).abs(), wall, t);
-            let better = match best {
-                None => true,
-                Some(b) => {
-                    key.0 < b.0 - 1e-6 || ((key.0 - b.0).abs() <= 1e-6 && key.1 < b.1 - 1e-9)
+        };
+        let keys: Vec<Key> = [
+            (
+                DVec2::new(outline.x0 - tw / 2.0, outline.y0 - tw / 2.0),
+                corner_mid(Wall::YMin, false),
+            ),
+            (
+                DVec2::new(outline.x1 + tw / 2.0, outline.y0 - tw / 2.0),
+                corner_mid(Wall::YMin, true),
+            ),
+            (
+                DVec2::new(outline.x1 + tw / 2.0, outline.y1 + tw / 2.0),
+                corner_mid(Wall::YMax, true),
+            ),
+            (
+                DVec2::new(outline.x0 - tw / 2.0, outline.y1 + tw / 2.0),
+                corner_mid(Wall::YMax, false),
+            ),
+        ]
+        .into_iter()
+        .map(|(xy, z)| Key { at: xy.extend(z) })
+        .collect();
+
+        for k in &keys {
+            let xy = k.at.truncate();
+            let to_cavity = outline.signed_distance(xy) - socket_r;
+            let to_outside = -block.signed_distance(xy) - socket_r;
+            if to_cavity < MIN_WALL_MM || to_outside < MIN_WALL_MM {
+                return Err(misfit(
+                    "keys-clear-cavity",
+                    Some(MoldParam::KeyDiameter),
+                    k.at,
+                    format!(
+                        "a key socket {:.1} mm wide here comes {:.2} mm from the cavity and {:.2} mm from the block's side (at least {MIN_WALL_MM} mm needed)",
+                        2.0 * socket_r,
+                        to_cavity,
+                        to_outside
+                    ),
+                    format!(
+                        "make mold.key_diameter at most {:.1} mm or mold.wall_thickness larger",
+                        (tw - 2.0 * MIN_WALL_MM - 2.0 * p.key_clearance).max(0.0)
+                    ),
+                ));
+            }
+            let socket_top = k.at.z + p.key_height + p.key_clearance;
+            let bump_bottom = k.at.z - 0.5 * p.key_height;
+            if block_hi.z - socket_top < MIN_WALL_MM || bump_bottom - block_lo.z < MIN_WALL_MM {
+                return Err(misfit(
+                    "keys-clear-cavity",
+                    Some(MoldParam::KeyHeight),
+                    k.at,
+                    "the key is too tall for the block's height here".into(),
+                    "make mold.key_height smaller or mold.wall_thickness larger".into(),
+                ));
+            }
+        }
+        Ok(keys)
+    }
+
+    /// The gate: the lowest point of the smooth mid-wall curve, away from
+    /// the corners (where the keys are); ties go to the point nearest a
+    /// wall's middle. With it the runner, the sprue and the pour cone.
+    fn gate(&self, mid: &Survey) -> Result<Gate> {
+        let (outline, p) = (self.outline, self.p);
+        let (tw, socket_r, block_hi) = (p.wall_thickness, self.socket_r, self.block_hi);
+        let hi_z = self.device_top;
+        let (r_g, r_s, r_c) = (
+            p.gate_diameter / 2.0,
+            p.sprue_diameter / 2.0,
+            p.pour_cone_diameter / 2.0,
+        );
+        let keepout = (r_c + socket_r + MIN_WALL_MM - tw / 2.0).max(r_g + MIN_WALL_MM);
+        let n = SURVEY_NODES;
+        let mut best: Option<(f64, f64, Wall, f64)> = None; // (z, distance to wall middle, wall, t)
+        for j in 0..n {
+            for i in 0..n {
+                let Some(Some(wall)) = mid.border(i, j) else {
+                    continue;
+                };
+                let q = mid.points[j][i];
+                let (s0, s1) = wall.span(&outline);
+                let t = wall.along(q).clamp(s0, s1);
+                if t < s0 + keepout || t > s1 - keepout {
+                    continue;
                 }
-            };
-            if better {
-                best = Some(key);
+                let key = (q.z, (t - 0.5 * (s0 + s1)).abs(), wall, t);
+                let better = match best {
+                    None => true,
+                    Some(b) => {
+                        key.0 < b.0 - 1e-6 || ((key.0 - b.0).abs() <= 1e-6 && key.1 < b.1 - 1e-9)
+                    }
+                };
+                if better {
+                    best = Some(key);
+                }
             }
         }
-    }
-    let Some((_, _, gate_wall, t_g)) = best else {
-        return Err(misfit(
-            "gate-fits-wall",
-            Some(MoldParam::WallThickness),
-            outline.centre().extend(0.0),
-            format!("no wall is long enough to take a gate {keepout:.1} mm or more from its corner keys"),
-            "make the device larger, or the pour cone and keys smaller".into(),
-        ));
-    };
-    let wc = curve(gate_wall);
-    let m_g = wc.mid.eval(t_g);
-    let at = gate_wall.point(&outline, t_g, m_g);
-    let (top_min, _) = wc.upper.range(t_g - r_g, t_g + r_g);
-    let (_, bottom_max) = wc.lower.range(t_g - r_g, t_g + r_g);
-    let room = (top_min - m_g).min(m_g - bottom_max) - GATE_EDGE_GAP_MM;
-    if r_g > room {
-        return Err(misfit(
-            "gate-fits-wall",
-            Some(MoldParam::GateDiameter),
+        let Some((_, _, gate_wall, t_g)) = best else {
+            return Err(misfit(
+                "gate-fits-wall",
+                Some(MoldParam::WallThickness),
+                outline.centre().extend(0.0),
+                format!("no wall is long enough to take a gate {keepout:.1} mm or more from its corner keys"),
+                "make the device larger, or the pour cone and keys smaller".into(),
+            ));
+        };
+        let wc = self.curve(gate_wall);
+        let m_g = wc.mid.eval(t_g);
+        let at = gate_wall.point(&outline, t_g, m_g);
+        let (top_min, _) = wc.upper.range(t_g - r_g, t_g + r_g);
+        let (_, bottom_max) = wc.lower.range(t_g - r_g, t_g + r_g);
+        let room = (top_min - m_g).min(m_g - bottom_max) - GATE_EDGE_GAP_MM;
+        if r_g > room {
+            return Err(misfit(
+                "gate-fits-wall",
+                Some(MoldParam::GateDiameter),
+                at,
+                format!(
+                    "a gate {} mm wide does not fit the {} wall, which is {:.3} mm high there",
+                    p.gate_diameter,
+                    gate_wall.name(),
+                    top_min - bottom_max
+                ),
+                format!(
+                    "set mold.gate_diameter to at most {:.2} mm",
+                    (2.0 * room).max(0.0)
+                ),
+            ));
+        }
+        let out = gate_wall.outward();
+        let sprue_axis = at.truncate() + out * (tw / 2.0);
+        if tw / 2.0 - r_s < MIN_WALL_MM {
+            return Err(misfit(
+                "sprue-fits-wall",
+                Some(MoldParam::SprueDiameter),
+                sprue_axis.extend(m_g),
+                format!(
+                    "a sprue {} mm wide in the middle of a {tw} mm wall leaves less than {MIN_WALL_MM} mm to the cavity and the outside",
+                    p.sprue_diameter
+                ),
+                format!("make mold.wall_thickness at least {:.1} mm or the sprue narrower", 2.0 * (r_s + MIN_WALL_MM)),
+            ));
+        }
+        if tw / 2.0 - r_c < MIN_WALL_MM - 1e-12 {
+            return Err(misfit(
+                "sprue-fits-wall",
+                Some(MoldParam::PourConeDiameter),
+                sprue_axis.extend(block_hi.z),
+                format!(
+                    "a pour cone {} mm wide leaves less than {MIN_WALL_MM} mm to the block's side",
+                    p.pour_cone_diameter
+                ),
+                format!(
+                    "set mold.pour_cone_diameter to at most {:.1} mm",
+                    tw - 2.0 * MIN_WALL_MM
+                ),
+            ));
+        }
+        let cone_floor = block_hi.z - p.pour_cone_depth;
+        if cone_floor - hi_z < MIN_WALL_MM {
+            return Err(misfit(
+                "sprue-fits-wall",
+                Some(MoldParam::PourConeDepth),
+                sprue_axis.extend(cone_floor),
+                "the pour cone reaches within 1 mm of the cavity's height".into(),
+                "make the pour cone shallower or the walls thicker".into(),
+            ));
+        }
+        Ok(Gate {
+            wall: gate_wall,
             at,
-            format!(
-                "a gate {} mm wide does not fit the {} wall, which is {:.3} mm high there",
-                p.gate_diameter,
-                gate_wall.name(),
-                top_min - bottom_max
-            ),
-            format!(
-                "set mold.gate_diameter to at most {:.2} mm",
-                (2.0 * room).max(0.0)
-            ),
-        ));
+            radius: r_g,
+            sprue_axis,
+            sprue_radius: r_s,
+            sprue_bottom_z: m_g - r_g,
+            cone_radius: r_c,
+            cone_depth: p.pour_cone_depth,
+        })
     }
-    let out = gate_wall.outward();
-    let sprue_axis = at.truncate() + out * (tw / 2.0);
-    if tw / 2.0 - r_s < MIN_WALL_MM {
-        return Err(misfit(
-            "sprue-fits-wall",
-            Some(MoldParam::SprueDiameter),
-            sprue_axis.extend(m_g),
-            format!(
-                "a sprue {} mm wide in the middle of a {tw} mm wall leaves less than {MIN_WALL_MM} mm to the cavity and the outside",
-                p.sprue_diameter
-            ),
-            format!("make mold.wall_thickness at least {:.1} mm or the sprue narrower", 2.0 * (r_s + MIN_WALL_MM)),
-        ));
-    }
-    if tw / 2.0 - r_c < MIN_WALL_MM - 1e-12 {
-        return Err(misfit(
-            "sprue-fits-wall",
-            Some(MoldParam::PourConeDiameter),
-            sprue_axis.extend(block_hi.z),
-            format!(
-                "a pour cone {} mm wide leaves less than {MIN_WALL_MM} mm to the block's side",
-                p.pour_cone_diameter
-            ),
-            format!(
-                "set mold.pour_cone_diameter to at most {:.1} mm",
-                tw - 2.0 * MIN_WALL_MM
-            ),
-        ));
-    }
-    let cone_floor = block_hi.z - p.pour_cone_depth;
-    if cone_floor - hi.z < MIN_WALL_MM {
-        return Err(misfit(
-            "sprue-fits-wall",
-            Some(MoldParam::PourConeDepth),
-            sprue_axis.extend(cone_floor),
-            "the pour cone reaches within 1 mm of the cavity's height".into(),
-            "make the pour cone shallower or the walls thicker".into(),
-        ));
-    }
-    let gate = Gate {
-        wall: gate_wall,
-        at,
-        radius: r_g,
-        sprue_axis,
-        sprue_radius: r_s,
-        sprue_bottom_z: m_g - r_g,
-        cone_radius: r_c,
-        cone_depth: p.pour_cone_depth,
-    };
 
-    // --- Vents at the ceiling's local maxima (ties form plateaus: one vent each).
-    let r_v = p.vent_diameter / 2.0;
-    let overlap = r_v / 2.0;
-    let z = |i: usize, j: usize| ceiling.points[j][i].z;
-    let span_z = {
-        let all = ceiling.points.iter().flatten().map(|q| q.z);
-        let (a, b) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), z| {
-            (a.min(z), b.max(z))
-        });
-        b - a
-    };
-    let tie = 1e-9 * (1.0 + span_z);
-    let neighbours = |i: usize, j: usize| {
-        let mut out = Vec::with_capacity(8);
-        for dj in -1i64..=1 {
-            for di in -1i64..=1 {
-                let (ni, nj) = (i as i64 + di, j as i64 + dj);
-                if (di, dj) != (0, 0)
-                    && ni >= 0
-                    && nj >= 0
-                    && (ni as usize) < n
-                    && (nj as usize) < n
-                {
-                    out.push((ni as usize, nj as usize));
-                }
-            }
-        }
-        out
-    };
-    let is_max = |i: usize, j: usize| {
-        neighbours(i, j)
-            .iter()
-            .all(|&(a, b)| z(a, b) <= z(i, j) + tie)
-    };
-    let mut component = vec![usize::MAX; n * n];
-    let mut plateaus: Vec<Vec<(usize, usize)>> = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            if component[j * n + i] != usize::MAX || !is_max(i, j) {
-                continue;
-            }
-            let id = plateaus.len();
-            let mut members = vec![(i, j)];
-            component[j * n + i] = id;
-            let mut k = 0;
-            while k < members.len() {
-                let (a, b) = members[k];
-                for (c, d) in neighbours(a, b) {
-                    if component[d * n + c] == usize::MAX
-                        && (z(c, d) - z(a, b)).abs() <= tie
-                        && is_max(c, d)
-                    {
-                        component[d * n + c] = id;
-                        members.push((c, d));
+    /// A vent at each plateau of the ceiling's local maxima: on the wall
+    /// or corner where the plateau reaches the outline, else on the lenses
+    /// (with a warning: its stub is on the optics).
+    fn vents(
+        &self,
+        ceiling: &Survey,
+        gate: &Gate,
+        (upper, lower): (&HeightQuery, &HeightQuery),
+        warnings: &mut Vec<String>,
+    ) -> Result<Vec<Vent>> {
+        let (outline, p) = (self.outline, self.p);
+        let r_v = p.vent_diameter / 2.0;
+        let overlap = r_v / 2.0;
+        let mut vents: Vec<Vent> = Vec::new();
+        for members in ceiling.plateaus() {
+            // A plateau that reaches the outline is vented there, as far from
+            // the gate as it can be; otherwise at its highest node.
+            let on_border: Vec<_> = members
+                .iter()
+                .filter(|&&(i, j)| ceiling.border(i, j).is_some())
+                .copied()
+                .collect();
+            let (i, j) = if on_border.is_empty() {
+                *members
+                    .iter()
+                    .max_by(|a, b| ceiling.points[a.1][a.0].z.total_cmp(&ceiling.points[b.1][b.0].z))
+                    .expect("non-empty plateau")
+            } else {
+                *on_border
+                    .iter()
+                    .max_by(|a, b| {
+                        let da = ceiling.points[a.1][a.0]
+                            .truncate()
+                            .distance(gate.at.truncate());
+                        let db = ceiling.points[b.1][b.0]
+                            .truncate()
+                            .distance(gate.at.truncate());
+                        da.total_cmp(&db)
+                    })
+                    .expect("non-empty border")
+            };
+            let q = ceiling.points[j][i];
+            let clamped = DVec2::new(
+                q.x.clamp(outline.x0, outline.x1),
+                q.y.clamp(outline.y0, outline.y1),
+            );
+            let vent = match ceiling.border(i, j) {
+                Some(Some(wall)) => {
+                    let c = self.curve(wall);
+                    let t = wall.along(clamped.extend(0.0));
+                    let foot = 0.5 * (c.mid.eval(t) + c.upper.eval(t));
+                    let on = wall.point(&outline, t, foot).truncate();
+                    Vent {
+                        maximum: q,
+                        place: VentPlace::Wall(wall),
+                        axis: on + wall.outward() * (r_v - overlap),
+                        radius: r_v,
+                        foot_z: foot,
                     }
                 }
-                k += 1;
-            }
-            plateaus.push(members);
-        }
-    }
-    let mut vents: Vec<Vent> = Vec::new();
-    for members in plateaus {
-        // A plateau that reaches the outline is vented there, as far from
-        // the gate as it can be; otherwise at its highest node.
-        let on_border: Vec<_> = members
-            .iter()
-            .filter(|&&(i, j)| ceiling.border(i, j).is_some())
-            .copied()
-            .collect();
-        let (i, j) = if on_border.is_empty() {
-            *members
-                .iter()
-                .max_by(|a, b| z(a.0, a.1).total_cmp(&z(b.0, b.1)))
-                .expect("non-empty plateau")
-        } else {
-            *on_border
-                .iter()
-                .max_by(|a, b| {
-                    let da = ceiling.points[a.1][a.0]
-                        .truncate()
-                        .distance(gate.at.truncate());
-                    let db = ceiling.points[b.1][b.0]
-                        .truncate()
-                        .distance(gate.at.truncate());
-                    da.total_cmp(&db)
-                })
-                .expect("non-empty border")
-        };
-        let q = ceiling.points[j][i];
-        let clamped = DVec2::new(
-            q.x.clamp(outline.x0, outline.x1),
-            q.y.clamp(outline.y0, outline.y1),
-        );
-        let vent = match ceiling.border(i, j) {
-            Some(Some(wall)) => {
-                let c = curve(wall);
-                let t = wall.along(clamped.extend(0.0));
-                let foot = 0.5 * (c.mid.eval(t) + c.upper.eval(t));
-                let on = wall.point(&outline, t, foot).truncate();
-                Vent {
-                    maximum: q,
-                    place: VentPlace::Wall(wall),
-                    axis: on + wall.outward() * (r_v - overlap),
-                    radius: r_v,
-                    foot_z: foot,
-                }
-            }
-            Some(None) => {
-                let corner = DVec2::new(
-                    if clamped.x - outline.x0 < outline.x1 - clamped.x {
-                        outline.x0
+                Some(None) => {
+                    let corner = DVec2::new(
+                        if clamped.x - outline.x0 < outline.x1 - clamped.x {
+                            outline.x0
+                        } else {
+                            outline.x1
+                        },
+                        if clamped.y - outline.y0 < outline.y1 - clamped.y {
+                            outline.y0
+                        } else {
+                            outline.y1
+                        },
+                    );
+                    let wall = if corner.y == outline.y0 {
+                        Wall::YMin
                     } else {
-                        outline.x1
-                    },
-                    if clamped.y - outline.y0 < outline.y1 - clamped.y {
-                        outline.y0
-                    } else {
-                        outline.y1
-                    },
-                );
-                let wall = if corner.y == outline.y0 {
-                    Wall::YMin
-                } else {
-                    Wall::YMax
-                };
-                let c = curve(wall);
-                let t = corner.x;
-                let foot = 0.5 * (c.mid.eval(t) + c.upper.eval(t));
-                let dir = (corner - outline.centre()).signum() * std::f64::consts::FRAC_1_SQRT_2;
-                Vent {
-                    maximum: q,
-                    place: VentPlace::Corner,
-                    axis: corner + dir * (r_v - overlap),
-                    radius: r_v,
-                    foot_z: foot,
+                        Wall::YMax
+                    };
+                    let c = self.curve(wall);
+                    let t = corner.x;
+                    let foot = 0.5 * (c.mid.eval(t) + c.upper.eval(t));
+                    let dir = (corner - outline.centre()).signum() * std::f64::consts::FRAC_1_SQRT_2;
+                    Vent {
+                        maximum: q,
+                        place: VentPlace::Corner,
+                        axis: corner + dir * (r_v - overlap),
+                        radius: r_v,
+                        foot_z: foot,
+                    }
                 }
-            }
-            None => {
-                let (top, bottom) = (upper.height(clamped), lower.height(clamped));
-                let (Some(top), Some(bottom)) = (top, bottom) else {
-                    return Err(MoldError::NotSolid {
-                        what: "device",
-                        detail: format!("no device above ({:.3}, {:.3})", clamped.x, clamped.y),
-                    });
-                };
-                warnings.push(format!(
-                    "the cavity's ceiling has a maximum inside the outline at ({:.2}, {:.2}) mm: its vent leaves a {:.1} mm stub on the lenses{}",
-                    clamped.x,
-                    clamped.y,
-                    p.vent_diameter,
-                    if p.flip { "" } else { "; set mold.flip = true to mould the device upside down" }
-                ));
-                Vent {
-                    maximum: q,
-                    place: VentPlace::Lenses,
-                    axis: clamped,
-                    radius: r_v,
-                    foot_z: 0.5 * (top + bottom),
+                None => {
+                    let (top, bottom) = (upper.height(clamped), lower.height(clamped));
+                    let (Some(top), Some(bottom)) = (top, bottom) else {
+                        return Err(MoldError::NotSolid {
+                            what: "device",
+                            detail: format!("no device above ({:.3}, {:.3})", clamped.x, clamped.y),
+                        });
+                    };
+                    warnings.push(format!(
+                        "the cavity's ceiling has a maximum inside the outline at ({:.2}, {:.2}) mm: its vent leaves a {:.1} mm stub on the lenses{}",
+                        clamped.x,
+                        clamped.y,
+                        p.vent_diameter,
+                        if p.flip { "" } else { "; set mold.flip = true to mould the device upside down" }
+                    ));
+                    Vent {
+                        maximum: q,
+                        place: VentPlace::Lenses,
+                        axis: clamped,
+                        radius: r_v,
+                        foot_z: 0.5 * (top + bottom),
+                    }
                 }
+            };
+            // Plateaus next to each other share a vent.
+            if vents
+                .iter()
+                .any(|v| v.axis.distance(vent.axis) < 2.0 * r_v + MIN_WALL_MM)
+            {
+                continue;
             }
-        };
-        // Plateaus next to each other share a vent.
-        if vents
-            .iter()
-            .any(|v| v.axis.distance(vent.axis) < 2.0 * r_v + MIN_WALL_MM)
-        {
-            continue;
+            vents.push(vent);
         }
-        vents.push(vent);
+        Ok(vents)
     }
 
-    // Every vent column must rise to the top face inside the block and clear
-    // of the sprue, the pour cone and the key sockets.
-    for v in &vents {
-        let at = v.axis.extend(v.foot_z);
-        let side_gap = -block.signed_distance(v.axis) - v.radius;
-        if side_gap < MIN_WALL_MM {
-            return Err(misfit(
-                "vents-reach-top-face",
-                Some(MoldParam::VentDiameter),
-                at,
-                format!(
-                    "a vent {} mm wide here passes {side_gap:.2} mm from the block's side on its way to the top face (at least {MIN_WALL_MM} mm needed)",
-                    p.vent_diameter
-                ),
-                "make mold.vent_diameter smaller or mold.wall_thickness larger".into(),
-            ));
-        }
-        let sprue_gap = v.axis.distance(gate.sprue_axis) - v.radius - r_c;
-        if sprue_gap < MIN_WALL_MM {
-            return Err(misfit(
-                "vents-reach-top-face",
-                Some(MoldParam::VentDiameter),
-                at,
-                format!(
-                    "the vent column runs into the sprue and pour cone ({sprue_gap:.2} mm apart)"
-                ),
-                "make the vents or the pour cone narrower".into(),
-            ));
-        }
-        for k in &keys {
-            let gap = v.axis.distance(k.at.truncate()) - v.radius - socket_r;
-            if gap < MIN_WALL_MM {
+    /// Every vent column rises to the top face inside the block, clear of
+    /// the sprue, the pour cone and the key sockets; no key socket runs
+    /// into the sprue.
+    fn check_columns(&self, vents: &[Vent], gate: &Gate, keys: &[Key]) -> Result<()> {
+        let (block, p, socket_r) = (self.block, self.p, self.socket_r);
+        let r_c = gate.cone_radius;
+        for v in vents {
+            let at = v.axis.extend(v.foot_z);
+            let side_gap = -block.signed_distance(v.axis) - v.radius;
+            if side_gap < MIN_WALL_MM {
                 return Err(misfit(
                     "vents-reach-top-face",
                     Some(MoldParam::VentDiameter),
                     at,
-                    format!("the vent column runs into a key socket ({gap:.2} mm apart)"),
-                    "make the vents or the keys smaller".into(),
+                    format!(
+                        "a vent {} mm wide here passes {side_gap:.2} mm from the block's side on its way to the top face (at least {MIN_WALL_MM} mm needed)",
+                        p.vent_diameter
+                    ),
+                    "make mold.vent_diameter smaller or mold.wall_thickness larger".into(),
+                ));
+            }
+            let sprue_gap = v.axis.distance(gate.sprue_axis) - v.radius - r_c;
+            if sprue_gap < MIN_WALL_MM {
+                return Err(misfit(
+                    "vents-reach-top-face",
+                    Some(MoldParam::VentDiameter),
+                    at,
+                    format!(
+                        "the vent column runs into the sprue and pour cone ({sprue_gap:.2} mm apart)"
+                    ),
+                    "make the vents or the pour cone narrower".into(),
+                ));
+            }
+            for k in keys {
+                let gap = v.axis.distance(k.at.truncate()) - v.radius - socket_r;
+                if gap < MIN_WALL_MM {
+                    return Err(misfit(
+                        "vents-reach-top-face",
+                        Some(MoldParam::VentDiameter),
+                        at,
+                        format!("the vent column runs into a key socket ({gap:.2} mm apart)"),
+                        "make the vents or the keys smaller".into(),
+                    ));
+                }
+            }
+        }
+
+        for k in keys {
+            let xy = k.at.truncate();
+            let gap = xy.distance(gate.sprue_axis) - socket_r - r_c;
+            if gap < MIN_WALL_MM {
+                return Err(misfit(
+                    "keys-clear-cavity",
+                    Some(MoldParam::KeyDiameter),
+                    k.at,
+                    format!("the key socket runs into the sprue ({gap:.2} mm apart)"),
+                    "make the keys or the pour cone smaller".into(),
                 ));
             }
         }
+        Ok(())
     }
 
-    for k in &keys {
-        let xy = k.at.truncate();
-        let gap = xy.distance(gate.sprue_axis) - socket_r - r_c;
-        if gap < MIN_WALL_MM {
-            return Err(misfit(
-                "keys-clear-cavity",
-                Some(MoldParam::KeyDiameter),
-                k.at,
-                format!("the key socket runs into the sprue ({gap:.2} mm apart)"),
-                "make the keys or the pour cone smaller".into(),
-            ));
-        }
-    }
-
-    // --- Bolt holes along the rim's middle line, between the keys.
-    let mut bolts = Vec::new();
-    if p.bolts {
+    /// Bolt holes along the rim's middle line, between the keys, where they
+    /// clear the sprue, the vents and the keys.
+    fn bolts(&self, keys: &[Key], gate: &Gate, vents: &[Vent]) -> Result<Vec<DVec2>> {
+        let (p, socket_r) = (self.p, self.socket_r);
+        let (tw, r_c) = (p.wall_thickness, gate.cone_radius);
+        let mut bolts = Vec::new();
         let r_b = p.bolt_diameter / 2.0;
         if tw / 2.0 - r_b < MIN_WALL_MM {
             return Err(misfit(
@@ -629,17 +721,8 @@ pub fn place(
                 }
             }
         }
+        Ok(bolts)
     }
-
-    Ok(Features {
-        block_lo,
-        block_hi,
-        gate,
-        vents,
-        keys,
-        bolts,
-        warnings,
-    })
 }
 
 /// The runner from just inside the cavity to the sprue's axis.
