@@ -1,0 +1,551 @@
+//! Cutting the halves (METHOD §6): the key solids, the regions of the block
+//! on each side of the parting surface (floored by the device's own faces),
+//! the channels, and each half as its region minus its channels, with a
+//! far patch of device faces kept out of the boolean where it can be.
+
+use crate::boolean::{
+    self, checked, cuboid, horizontal_cylinder, to_manifold, to_mesh, union_all,
+    vertical_frustum,
+};
+use crate::error::{MoldError, Result};
+use crate::features::{self, Features};
+use crate::params::MoldParams;
+use crate::parting::{self, Face, Floor, HeightQuery, PartSide, PosedDevice, Region, WallCurves};
+use crate::split;
+use crate::tiling;
+use glam::{DVec2, DVec3};
+use manifold_rust::manifold::Manifold;
+use moirecast_kernel::check::{solid_checks_of_genus, CheckResult, CheckedMesh, SolidSpec};
+use moirecast_kernel::Mesh;
+use rayon::prelude::*;
+
+/// Edges shorter than this (mm) that the channels leave where they cross the
+/// device's faces are collapsed: far below any tolerance, and long enough
+/// that no triangle can flip when written as f32 STL.
+const SLIVER_MM: f64 = 1e-6;
+/// How far (mm) the parting region and through-channels reach past the block.
+const PAST_BLOCK_MM: f64 = 1.0;
+/// Spacing (mm) of the parting surface's grid inside the outline.
+const PARTING_CELL_MM: f64 = 1.0;
+
+/// How a half's region meets manifold: both give the same triangles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HalfCut {
+    /// The device faces no channel comes near are left out of the boolean
+    /// and put back after it, where they form one patch (`split`); the
+    /// rest of the region is cut. Four to six times less work at 120 lenses.
+    SplitFarPatch,
+    /// The whole region is cut: for cross-checks.
+    Whole,
+}
+
+/// A half, with its solid checks, and for each triangle the original ID of
+/// the mesh it came from and its face there (as [`boolean::Traced`]).
+pub(crate) struct Half {
+    pub solid: CheckedMesh,
+    pub source: Vec<(u32, u64)>,
+}
+
+/// A half, checked, with its mesh and its solid checks (genus `genus`). If
+/// the channels left slivers where they cross the device's faces at a
+/// shallow angle (edges shorter than `SLIVER_MM`, or triangles and vertices
+/// the solid checks reject: needles, f32 rounding faults), they are
+/// collapsed first and the half checked again (manifold's `simplify`; it
+/// costs a pass over the whole half, so it runs only when needed).
+fn sliver_free(
+    what: &str,
+    half: Manifold,
+    genus: u32,
+    join: impl Fn(boolean::Traced) -> Option<boolean::Traced>,
+) -> Result<Option<Half>> {
+    let half = checked(what, half)?;
+    let spec = SolidSpec::boolean_result(genus);
+    let checked_half = |traced: boolean::Traced| Half {
+        solid: CheckedMesh::check(traced.mesh, spec),
+        source: traced.source,
+    };
+    let Some(traced) = join(to_mesh(&half)) else {
+        return Ok(None);
+    };
+    let done = checked_half(traced);
+    let m = done.solid.mesh();
+    let shortest = m
+        .triangles
+        .par_iter()
+        .flat_map_iter(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+        .map(|(a, b)| m.positions[a as usize].distance(m.positions[b as usize]))
+        .reduce(|| f64::INFINITY, f64::min);
+    if shortest >= SLIVER_MM && !has_slivers(done.solid.checks()) {
+        return Ok(Some(done));
+    }
+    let half = checked(
+        format!("{what}, slivers collapsed"),
+        half.simplify(SLIVER_MM),
+    )?;
+    Ok(join(to_mesh(&half)).map(checked_half))
+}
+
+/// The bottom and top rings of a vertical key frustum over `centre`, as
+/// the bottom region builds its bump from them: vertex k of each on the
+/// same side edge, counter-clockwise seen from above.
+fn frustum_rings(centre: DVec2, frustum: &Manifold) -> parting::Bump {
+    let mesh = to_mesh(frustum).mesh;
+    let (z0, z1) = mesh
+        .positions
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.z), hi.max(p.z))
+        });
+    let ring = |z: f64| {
+        let mut r: Vec<DVec3> = mesh
+            .positions
+            .iter()
+            .copied()
+            .filter(|p| p.z == z && p.truncate().distance(centre) > 1e-9)
+            .collect();
+        r.sort_by(|a, b| {
+            let angle = |p: &DVec3| (p.y - centre.y).atan2(p.x - centre.x);
+            angle(a).total_cmp(&angle(b))
+        });
+        r
+    };
+    parting::Bump {
+        centre,
+        bottom: ring(z0),
+        top: ring(z1),
+    }
+}
+
+/// The solid checks that fail on slivers: a half failing one of them has
+/// its slivers collapsed (see [`sliver_free`]).
+const SLIVER_CHECKS: [&str; 3] = [
+    "no-degenerate-triangles",
+    "f32-safe-triangles",
+    "f32-distinct-vertices",
+];
+
+/// Whether any of the [`SLIVER_CHECKS`] failed.
+fn has_slivers(checks: &[CheckResult]) -> bool {
+    checks
+        .iter()
+        .any(|c| !c.passed && SLIVER_CHECKS.contains(&c.name))
+}
+
+/// The registration keys as solids: a tapered bump on the bottom half, in
+/// a socket with clearance in the top half.
+pub(crate) struct KeySolids {
+    pub bumps: Vec<Manifold>,
+    pub sockets: Vec<Manifold>,
+    /// Each bump's rings, as the bottom region builds its bump from them.
+    pub rings: Vec<parting::Bump>,
+}
+
+impl KeySolids {
+    pub fn new(f: &Features, p: &MoldParams) -> Result<Self> {
+        let tan = p.key_taper_deg.to_radians().tan();
+        let (h, c) = (p.key_height, p.key_clearance);
+        let r_low = p.key_diameter / 2.0 + 0.5 * h * tan;
+        let mut bumps = Vec::new();
+        let mut sockets = Vec::new();
+        for k in &f.keys {
+            let (xy, z) = (k.at.truncate(), k.at.z);
+            bumps.push(vertical_frustum(
+                xy,
+                z - 0.5 * h,
+                z + h,
+                (r_low, r_low - 1.5 * h * tan),
+                0.0,
+            )?);
+            sockets.push(vertical_frustum(
+                xy,
+                z - 0.5 * h,
+                z + h + c,
+                (r_low + c, r_low + c - (1.5 * h + c) * tan),
+                0.0,
+            )?);
+        }
+        let rings = f
+            .keys
+            .iter()
+            .zip(&bumps)
+            .map(|(k, solid)| frustum_rings(k.at.truncate(), solid))
+            .collect();
+        Ok(KeySolids {
+            bumps,
+            sockets,
+            rings,
+        })
+    }
+}
+
+/// The block on each side of the parting surface, as closed meshes.
+pub(crate) struct Regions {
+    /// The halves before their channels: the device's own faces, walls
+    /// split at the parting line, and the skirt; the bottom one with the
+    /// key bumps.
+    pub top: Region,
+    pub bottom: Region,
+    /// The bottom half before its channels without its bumps (for the
+    /// tiling check).
+    pub bottom_plain: Region,
+    /// The regions over a grid through the device: what another tool
+    /// rebuilds the halves from (block side minus device).
+    pub above: Mesh,
+    pub below: Mesh,
+}
+
+impl Regions {
+    /// Every region, side by side, each checked to be a closed solid.
+    pub fn new(
+        posed: &PosedDevice,
+        walls: &[WallCurves],
+        f: &Features,
+        bump_rings: &[parting::Bump],
+        (upper_q, lower_q): (&HeightQuery, &HeightQuery),
+    ) -> Result<Self> {
+        let o = posed.outline;
+        let cells = (
+            (((o.x1 - o.x0) / PARTING_CELL_MM).ceil() as usize).clamp(4, 128),
+            (((o.y1 - o.y0) / PARTING_CELL_MM).ceil() as usize).clamp(4, 128),
+        );
+        let interior_mid = |q: DVec2| match (upper_q.height(q), lower_q.height(q)) {
+            (Some(a), Some(b)) => 0.5 * (a + b),
+            _ => f64::NAN,
+        };
+        let footprint = features::block_rect(f);
+        let region = |floor: Floor, side: PartSide, bumps: &[parting::Bump]| -> Result<Region> {
+            let cap_z = match side {
+                PartSide::Above => f.block_hi.z,
+                PartSide::Below => f.block_lo.z,
+            };
+            let grid = matches!(floor, Floor::Grid { .. });
+            let r = parting::parting_region(walls, floor, &footprint, cap_z, side, bumps);
+            if let Some(c) = solid_checks_of_genus(&r.mesh, 0)
+                .into_iter()
+                .find(|c| !c.passed)
+            {
+                return Err(MoldError::NotSolid {
+                    what: if grid {
+                        "parting region"
+                    } else {
+                        "mold half before its channels"
+                    },
+                    detail: format!("{side:?}: {}: {} ({})", c.name, c.value, c.detail),
+                });
+            }
+            Ok(r)
+        };
+        let grid = || Floor::Grid {
+            interior_mid: &interior_mid,
+            cells,
+        };
+        let ((top, (bottom, bottom_plain)), (above, below)) = rayon::join(
+            || {
+                rayon::join(
+                    || region(Floor::Device(posed), PartSide::Above, &[]),
+                    || {
+                        (
+                            region(Floor::Device(posed), PartSide::Below, bump_rings),
+                            region(Floor::Device(posed), PartSide::Below, &[]),
+                        )
+                    },
+                )
+            },
+            || {
+                (
+                    region(grid(), PartSide::Above, &[]).map(|r| r.mesh),
+                    region(grid(), PartSide::Below, &[]).map(|r| r.mesh),
+                )
+            },
+        );
+        Ok(Regions {
+            top: top?,
+            bottom: bottom?,
+            bottom_plain: bottom_plain?,
+            above: above?,
+            below: below?,
+        })
+    }
+}
+
+/// The channels, their polygons turned some degrees past the half facet.
+pub(crate) struct Channels {
+    /// What the silicone fills: runner, sprue, pour cone and vents.
+    pub fill: Manifold,
+    /// Those and the bolt holes.
+    pub all: Manifold,
+    /// Those and the key sockets: what the top half loses.
+    pub top_cut: Manifold,
+}
+
+impl Channels {
+    pub fn new(f: &Features, p: &MoldParams, sockets: &Manifold, twist: f64) -> Result<Self> {
+        let past_top = f.block_hi.z + PAST_BLOCK_MM;
+        let g = &f.gate;
+        let (from, dir, length) = features::runner_span(g);
+        let mut fill = vec![
+            horizontal_cylinder(from, dir, length, g.radius, twist)?,
+            vertical_frustum(
+                g.sprue_axis,
+                g.sprue_bottom_z,
+                past_top,
+                (g.sprue_radius, g.sprue_radius),
+                twist,
+            )?,
+            {
+                let floor = f.block_hi.z - g.cone_depth;
+                let r_top = g.sprue_radius
+                    + (g.cone_radius - g.sprue_radius) * (past_top - floor)
+                        / g.cone_depth.max(1e-9);
+                if g.cone_depth > 0.0 {
+                    vertical_frustum(
+                        g.sprue_axis,
+                        floor,
+                        past_top,
+                        (g.sprue_radius, r_top),
+                        twist,
+                    )?
+                } else {
+                    Manifold::empty()
+                }
+            },
+        ];
+        for v in &f.vents {
+            fill.push(vertical_frustum(
+                v.axis,
+                v.foot_z,
+                past_top,
+                (v.radius, v.radius),
+                twist,
+            )?);
+        }
+        let fill = union_all("runner, sprue and vents", fill)?;
+        let bolt_r = p.bolt_diameter / 2.0;
+        let bolts = union_all(
+            "bolt holes",
+            f.bolts
+                .iter()
+                .map(|&b| {
+                    vertical_frustum(
+                        b,
+                        f.block_lo.z - PAST_BLOCK_MM,
+                        past_top,
+                        (bolt_r, bolt_r),
+                        twist,
+                    )
+                })
+                .collect::<Result<_>>()?,
+        )?;
+        let all = checked("channels", fill.union(&bolts))?;
+        let top_cut = checked("channels and sockets", all.union(sockets))?;
+        Ok(Channels { fill, all, top_cut })
+    }
+}
+
+/// The two halves, cut, and what the cut measured.
+pub(crate) struct Cut {
+    pub top: Half,
+    pub bottom: Half,
+    pub channels: Channels,
+    /// The channels' part inside the block.
+    pub channels_in_block: Manifold,
+    /// The channels' part inside the cavity (the device).
+    pub channels_in_device: Manifold,
+    /// The manifold ID of the device's faces in the halves' sources.
+    pub device_id: u32,
+    /// The halves before their channels and the device tile the block.
+    pub tiling: CheckResult,
+    /// Why the channels were turned further than usual, if they were.
+    pub turned_note: Option<String>,
+}
+
+/// What cutting the halves takes.
+pub(crate) struct CutInputs<'a> {
+    pub posed: &'a PosedDevice,
+    pub f: &'a Features,
+    pub p: &'a MoldParams,
+    pub regions: &'a Regions,
+    pub block: &'a Manifold,
+    pub sockets: &'a Manifold,
+    pub cut_by: HalfCut,
+}
+
+/// Cuts each half's region by its channels (and the top one by the key
+/// sockets); beside them, the exact tiling certificate of the regions. If a
+/// channel's edge left a sliver manifold will not collapse, the channels
+/// are built again turned a quarter facet.
+pub(crate) fn cut_halves(c: &CutInputs) -> Result<Cut> {
+    let (f, regions) = (c.f, c.regions);
+    let mut channels = Channels::new(f, c.p, c.sockets, 0.0)?;
+    let genus_top = 1 + f.vents.len() as u32 + f.bolts.len() as u32;
+    let genus_bottom = f.bolts.len() as u32;
+    let device_id = Manifold::reserve_ids(1);
+    let interface_id = Manifold::reserve_ids(1);
+    let mut channels_in_block = checked(
+        "channels in the block",
+        channels.all.intersection(c.block),
+    )?;
+    let ids = (device_id, interface_id);
+    let above_side = (Face::Upper, 1.0, f.block_hi.z);
+    let below_side = (Face::Lower, -1.0, f.block_lo.z);
+    let top_chain = |top_cut: &Manifold, channels_in_block: &Manifold| -> Result<_> {
+        let (half, top) = cut_half(
+            c,
+            ("top half", &regions.top),
+            above_side,
+            top_cut,
+            genus_top,
+            ids,
+        )?;
+        let beside_top = checked(
+            "channels outside the top half",
+            channels_in_block.difference(&top),
+        )?;
+        Ok((half, beside_top))
+    };
+    let bottom_chain = |channels: &Manifold| -> Result<_> {
+        cut_half(
+            c,
+            ("bottom half", &regions.bottom),
+            below_side,
+            channels,
+            genus_bottom,
+            ids,
+        )
+    };
+    // The tiling certificate needs only the regions: it runs beside the
+    // booleans, whose two chains leave a core partly idle.
+    let ((top_t, bottom_t), tiling) = rayon::join(
+        || {
+            rayon::join(
+                || top_chain(&channels.top_cut, &channels_in_block),
+                || bottom_chain(&channels.all),
+            )
+        },
+        || {
+            tiling::tiles_block(
+                &[&regions.top.mesh, &regions.bottom_plain.mesh, &c.posed.mesh],
+                (f.block_lo, f.block_hi),
+            )
+        },
+    );
+    let ((mut top_h, mut beside_top), (mut bottom_h, bottom_before)) = (top_t?, bottom_t?);
+    // Rarely a channel's edge crosses a wall within nanometres of a device
+    // vertex, and manifold will not collapse the sliver between them: then
+    // the channels are built again turned a quarter facet.
+    let mut turned_note = None;
+    if has_slivers(top_h.solid.checks()) || has_slivers(bottom_h.solid.checks()) {
+        channels = Channels::new(f, c.p, c.sockets, boolean::QUARTER_FACET_DEG)?;
+        channels_in_block = checked(
+            "channels in the block",
+            channels.all.intersection(c.block),
+        )?;
+        let (t, b) = rayon::join(
+            || top_chain(&channels.top_cut, &channels_in_block),
+            || bottom_chain(&channels.all),
+        );
+        ((top_h, beside_top), (bottom_h, _)) = (t?, b?);
+        turned_note = Some(format!(
+            "the channels' polygons are turned {:.3}° more than usual: at the usual turn a channel crossed a wall within nanometres of a device vertex",
+            boolean::QUARTER_FACET_DEG
+        ));
+    }
+    // The regions and the device tile the block (checked exactly), so
+    // what of the channels lies in neither region lies in the device.
+    let channels_in_device = checked(
+        "channels in the cavity",
+        beside_top.difference(&bottom_before),
+    )?;
+    Ok(Cut {
+        top: top_h,
+        bottom: bottom_h,
+        channels,
+        channels_in_block,
+        channels_in_device,
+        device_id,
+        tiling,
+        turned_note,
+    })
+}
+
+/// A half: its region minus `cut`, and the solid manifold held of the
+/// region, which equals it wherever `cut` is (all of it, or all but a far
+/// patch of device faces that `cut` misses; see `split`).
+fn cut_half(
+    c: &CutInputs,
+    (what, region): (&str, &Region),
+    (kind, side, cap_z): (Face, f64, f64),
+    cut: &Manifold,
+    genus: u32,
+    (device_id, interface_id): (u32, u32),
+) -> Result<(Half, Manifold)> {
+    let split = match c.cut_by {
+        HalfCut::SplitFarPatch => {
+            // The xy boxes of the cut's pieces, which the patch keeps clear of.
+            let clear: Vec<(DVec2, DVec2)> = cut
+                .decompose()
+                .iter()
+                .map(|piece| {
+                    let b = piece.bounding_box();
+                    (DVec2::new(b.min.x, b.min.y), DVec2::new(b.max.x, b.max.y))
+                })
+                .collect();
+            split::split(region, c.posed, kind, side, &clear, cap_z)
+        }
+        HalfCut::Whole => None,
+    };
+    if let Some(s) = split {
+        let near = boolean::to_region_manifold(
+            what,
+            &s.near,
+            &s.near_device_faces,
+            device_id,
+            (s.interface, interface_id),
+        )?;
+        let joined = sliver_free(what, near.difference(cut), genus, |t| {
+            s.join(region, t, interface_id, device_id)
+        })?;
+        if let Some(done) = joined {
+            return Ok((done, near));
+        }
+    }
+    let whole = boolean::to_region_manifold(
+        what,
+        &region.mesh,
+        &region.device_faces,
+        device_id,
+        (0, interface_id),
+    )?;
+    let done = sliver_free(what, whole.difference(cut), genus, Some)?
+        .expect("a whole region needs no joining");
+    Ok((done, whole))
+}
+
+/// The block's two parts as manifolds: the box itself and the region above
+/// the parting surface.
+pub(crate) fn block_solids(f: &Features, regions: &Regions) -> Result<(Manifold, Manifold)> {
+    let above = to_manifold("block above the parting surface", &regions.above)?;
+    let block = cuboid(f.block_lo, f.block_hi)?;
+    Ok((above, block))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use moirecast_kernel::check::solid_checks_for;
+
+    /// `sliver_free` picks its checks by name: every name must be one the
+    /// kernel's solid checks report, or a renamed check would silently stop
+    /// slivers from being collapsed.
+    #[test]
+    fn sliver_checks_are_solid_checks() {
+        let cube = to_mesh(&cuboid(DVec3::ZERO, DVec3::ONE).unwrap()).mesh;
+        let names: Vec<&str> = solid_checks_for(&cube, SolidSpec::boolean_result(0))
+            .iter()
+            .map(|c| c.name)
+            .collect();
+        for name in SLIVER_CHECKS {
+            assert!(names.contains(&name), "{name} is not among {names:?}");
+        }
+    }
+}
