@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::sync::Mutex;
 
 #[derive(Parser)]
-#[command(name = "moirecast", version, about = "Curved-surface level-line moiré devices and their casting molds.", after_help = moirecast_spec::DEFAULTS)]
+#[command(name = "moirecast", version, about = "Curved-surface level-line moiré devices and their casting molds.", after_help = moirecast_spec::defaults_help())]
 struct Cli {
     #[command(subcommand)]
     command: Option<Command>,

@@ -4,8 +4,8 @@
 
 use crate::check::CheckResult;
 use crate::design::Design;
-use crate::lens::circumcircle;
 use crate::device_mesh::{DeviceMesh, Patch, Side, VertexOrigin};
+use crate::lens::circumcircle;
 use crate::model::LensRef;
 use crate::solve::newton_2d;
 use crate::tolerance::WALL_SNAP_MM;

@@ -267,9 +267,7 @@ impl BaseSection<'_> {
     /// (s is smooth on a period's scale, so the sag falls as 1/segments²).
     pub fn columns(&self, e: f64) -> usize {
         match *self {
-            BaseSection::Lens(arc) => {
-                crate::lens::columns_for(arc.radius, 2.0 * arc.half_angle, e)
-            }
+            BaseSection::Lens(arc) => crate::lens::columns_for(arc.radius, 2.0 * arc.half_angle, e),
             BaseSection::Band { .. } => {
                 let sag = (self.point(0.5) - 0.5 * (self.point(0.0) + self.point(1.0))).length();
                 ((sag / e).sqrt().ceil() as usize).max(1)

@@ -19,9 +19,9 @@
 //! the band on the walls.
 
 use crate::design::{BaseKind, Design, PrintedBase};
+use crate::device_mesh::{DeviceMesh, Patch, Side, VertexOrigin};
 use crate::error::{KernelError, Result};
 use crate::mesh::Mesh;
-use crate::device_mesh::{DeviceMesh, Patch, Side, VertexOrigin};
 use crate::model::LensRef;
 use crate::tolerance::WALL_SNAP_MM;
 use glam::DVec3;

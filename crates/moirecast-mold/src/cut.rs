@@ -4,8 +4,7 @@
 //! far patch of device faces kept out of the boolean where it can be.
 
 use crate::boolean::{
-    self, checked, cuboid, horizontal_cylinder, to_manifold, to_mesh, union_all,
-    vertical_frustum,
+    self, checked, cuboid, horizontal_cylinder, to_manifold, to_mesh, union_all, vertical_frustum,
 };
 use crate::error::{MoldError, Result};
 use crate::features::{self, Features};
@@ -381,10 +380,8 @@ pub(crate) fn cut_halves(c: &CutInputs) -> Result<Cut> {
     let genus_bottom = f.bolts.len() as u32;
     let device_id = Manifold::reserve_ids(1);
     let interface_id = Manifold::reserve_ids(1);
-    let mut channels_in_block = checked(
-        "channels in the block",
-        channels.all.intersection(c.block),
-    )?;
+    let mut channels_in_block =
+        checked("channels in the block", channels.all.intersection(c.block))?;
     let ids = (device_id, interface_id);
     let above_side = (Face::Upper, 1.0, f.block_hi.z);
     let below_side = (Face::Lower, -1.0, f.block_lo.z);
@@ -436,10 +433,7 @@ pub(crate) fn cut_halves(c: &CutInputs) -> Result<Cut> {
     let mut turned_note = None;
     if has_slivers(top_h.solid.checks()) || has_slivers(bottom_h.solid.checks()) {
         channels = Channels::new(f, c.p, c.sockets, boolean::QUARTER_FACET_DEG)?;
-        channels_in_block = checked(
-            "channels in the block",
-            channels.all.intersection(c.block),
-        )?;
+        channels_in_block = checked("channels in the block", channels.all.intersection(c.block))?;
         let (t, b) = rayon::join(
             || top_chain(&channels.top_cut, &channels_in_block),
             || bottom_chain(&channels.all),

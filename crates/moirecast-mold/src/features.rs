@@ -518,7 +518,11 @@ impl Site<'_> {
             let (i, j) = if on_border.is_empty() {
                 *members
                     .iter()
-                    .max_by(|a, b| ceiling.points[a.1][a.0].z.total_cmp(&ceiling.points[b.1][b.0].z))
+                    .max_by(|a, b| {
+                        ceiling.points[a.1][a.0]
+                            .z
+                            .total_cmp(&ceiling.points[b.1][b.0].z)
+                    })
                     .expect("non-empty plateau")
             } else {
                 *on_border
@@ -574,7 +578,8 @@ impl Site<'_> {
                     let c = self.curve(wall);
                     let t = corner.x;
                     let foot = 0.5 * (c.mid.eval(t) + c.upper.eval(t));
-                    let dir = (corner - outline.centre()).signum() * std::f64::consts::FRAC_1_SQRT_2;
+                    let dir =
+                        (corner - outline.centre()).signum() * std::f64::consts::FRAC_1_SQRT_2;
                     Vent {
                         maximum: q,
                         place: VentPlace::Corner,

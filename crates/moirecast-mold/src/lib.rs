@@ -16,15 +16,15 @@ pub mod parting;
 pub mod split;
 pub mod tiling;
 
+pub use cut::HalfCut;
 pub use error::{MoldError, MoldParam, Result};
 pub use features::{Features, Gate, Key, Vent, VentPlace};
-pub use cut::HalfCut;
 pub use invariants::{Draft, Volumes, CAVITY_ON_DEVICE_MM, OVERLAP_MM3, VOLUME_SUM_REL};
 pub use params::{MoldParams, MIN_WALL_MM};
 
 use boolean::{to_mesh, union_all};
-use manifold_rust::manifold::Manifold;
 use cut::{Channels, CutInputs, KeySolids, Regions};
+use manifold_rust::manifold::Manifold;
 use moirecast_kernel::check::{CheckResult, CheckedMesh};
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{Design, DeviceMesh, Mesh};
@@ -143,7 +143,14 @@ pub fn build_mold_with(
     checks.extend(invariants::filling(&cut, &f, drafts, p.min_draft_deg));
     progress.tick(1);
 
-    Ok(assemble(posed.mesh, f, cut, (regions, bumps, sockets), (volumes, drafts), checks))
+    Ok(assemble(
+        posed.mesh,
+        f,
+        cut,
+        (regions, bumps, sockets),
+        (volumes, drafts),
+        checks,
+    ))
 }
 
 /// The mold, with the construction solids another tool rebuilds the
@@ -157,7 +164,11 @@ fn assemble(
     checks: Vec<CheckResult>,
 ) -> Mold {
     let Channels { all: channels, .. } = &cut.channels;
-    let (vents, bolts, keys) = (f.vents.len() as u32, f.bolts.len() as u32, f.keys.len() as u32);
+    let (vents, bolts, keys) = (
+        f.vents.len() as u32,
+        f.bolts.len() as u32,
+        f.keys.len() as u32,
+    );
     let construction = vec![
         ConstructionSolid {
             name: "above",

@@ -8,6 +8,25 @@ use crate::error::{MoldError, MoldParam, Result};
 /// print badly.
 pub const MIN_WALL_MM: f64 = 1.0;
 
+/// Allowed ranges of the mold parameters, written once: validation and the
+/// spec's documentation both read them.
+pub mod limits {
+    use super::MIN_WALL_MM;
+    pub const WALL_THICKNESS: (f64, f64) = (MIN_WALL_MM, 100.0);
+    pub const GATE_DIAMETER: (f64, f64) = (0.2, 20.0);
+    pub const SPRUE_DIAMETER: (f64, f64) = (0.5, 20.0);
+    pub const VENT_DIAMETER: (f64, f64) = (0.2, 10.0);
+    pub const POUR_CONE_DEPTH: (f64, f64) = (0.0, 50.0);
+    pub const KEY_DIAMETER: (f64, f64) = (0.5, 50.0);
+    pub const KEY_HEIGHT: (f64, f64) = (0.2, 50.0);
+    pub const KEY_TAPER: (f64, f64) = (0.0, 30.0);
+    pub const KEY_CLEARANCE: (f64, f64) = (0.0, 2.0);
+    pub const BOLT_DIAMETER: (f64, f64) = (1.0, 20.0);
+    pub const BOLT_SPACING: (f64, f64) = (5.0, 500.0);
+    pub const SHRINK_SCALE: (f64, f64) = (0.9, 1.1);
+    pub const MIN_DRAFT: (f64, f64) = (0.0, 45.0);
+}
+
 /// Every dimension of the mold, in mm and degrees.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct MoldParams {
@@ -85,7 +104,7 @@ fn param(
     }
 }
 
-fn in_range(p: MoldParam, value: f64, lo: f64, hi: f64, what: &str) -> Result<()> {
+fn in_range(p: MoldParam, value: f64, (lo, hi): (f64, f64), what: &str) -> Result<()> {
     if value.is_finite() && value >= lo && value <= hi {
         Ok(())
     } else {
@@ -114,74 +133,79 @@ impl MoldParams {
         in_range(
             WallThickness,
             self.wall_thickness,
-            MIN_WALL_MM,
-            100.0,
+            limits::WALL_THICKNESS,
             "the wall thickness",
         )?;
         in_range(
             GateDiameter,
             self.gate_diameter,
-            0.2,
-            20.0,
+            limits::GATE_DIAMETER,
             "the gate diameter",
         )?;
         in_range(
             SprueDiameter,
             self.sprue_diameter,
-            0.5,
-            20.0,
+            limits::SPRUE_DIAMETER,
             "the sprue diameter",
         )?;
         in_range(
             VentDiameter,
             self.vent_diameter,
-            0.2,
-            10.0,
+            limits::VENT_DIAMETER,
             "the vent diameter",
         )?;
         in_range(
             PourConeDepth,
             self.pour_cone_depth,
-            0.0,
-            50.0,
+            limits::POUR_CONE_DEPTH,
             "the pour cone depth",
         )?;
         in_range(
             KeyDiameter,
             self.key_diameter,
-            0.5,
-            50.0,
+            limits::KEY_DIAMETER,
             "the key diameter",
         )?;
-        in_range(KeyHeight, self.key_height, 0.2, 50.0, "the key height")?;
-        in_range(KeyTaper, self.key_taper_deg, 0.0, 30.0, "the key taper")?;
+        in_range(
+            KeyHeight,
+            self.key_height,
+            limits::KEY_HEIGHT,
+            "the key height",
+        )?;
+        in_range(
+            KeyTaper,
+            self.key_taper_deg,
+            limits::KEY_TAPER,
+            "the key taper",
+        )?;
         in_range(
             KeyClearance,
             self.key_clearance,
-            0.0,
-            2.0,
+            limits::KEY_CLEARANCE,
             "the key clearance",
         )?;
         in_range(
             BoltDiameter,
             self.bolt_diameter,
-            1.0,
-            20.0,
+            limits::BOLT_DIAMETER,
             "the bolt hole diameter",
         )?;
         in_range(
             BoltSpacing,
             self.bolt_spacing,
-            5.0,
-            500.0,
+            limits::BOLT_SPACING,
             "the bolt spacing",
         )?;
-        in_range(ShrinkScale, self.shrink_scale, 0.9, 1.1, "the shrink scale")?;
+        in_range(
+            ShrinkScale,
+            self.shrink_scale,
+            limits::SHRINK_SCALE,
+            "the shrink scale",
+        )?;
         in_range(
             MinDraft,
             self.min_draft_deg,
-            0.0,
-            45.0,
+            limits::MIN_DRAFT,
             "the smallest draft",
         )?;
         if self.gate_diameter > self.sprue_diameter {

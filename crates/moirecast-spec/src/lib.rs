@@ -1,6 +1,6 @@
 //! The design spec: a TOML file, parsed and validated at the edge.
 //!
-//! Every key has a written default (see [`DEFAULTS`] and the README). An
+//! Every key has a written default (see [`keys`] and `docs/spec.md`). An
 //! unknown key, a value out of range or a missing image is a [`SpecError`]
 //! that names the key, the value, what is allowed and the fix. Nothing past
 //! this crate sees TOML.
@@ -10,9 +10,12 @@ use moirecast_kernel::{
     Param, PitchSurface, PrintedBase, Profile, ProfileMode, Raster,
 };
 use moirecast_mold::{MoldError, MoldParam, MoldParams};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
+
+mod keys;
+pub use keys::{defaults_help, keys, spec_markdown, KeyDoc, ValueKind};
 
 /// The reference design (`molds/saddle-horse.toml`), built when no spec is given.
 pub const DEFAULT_SPEC: &str = include_str!("../../../molds/saddle-horse.toml");
@@ -31,18 +34,8 @@ const EMBEDDED_IMAGES: &[(&str, &[u8])] = &[
     ),
 ];
 
-/// Written defaults of every optional key, shown by `moirecast --help` and the README.
-pub const DEFAULTS: &str = "\
-surface.kind = \"saddle\", surface.radius = 60 mm; layout 60 × 60 mm, period 0.5 mm;
-lens.afov = 60°, lens.index = 1.41 (Sylgard 184), lens.rule = \"constant-afov\";
-base.kind = \"dual-lens\", base.a = 0, base.d = \"focal\", base.levels = 1, base.afov = lens.afov;
-printed bases (base.kind = \"printed\"): base.duty = 0.5, base.band_thickness = 0.2 mm, base.backing = 1.0 mm;
-profile.kind = \"rings\" (wavelength = min(width, height)/4) unless profile.image is given;
-profile.mode = \"shape\", blur = 1 mm, threshold = 0.5, invert = false; mesh.tolerance = 0.002 mm;
-mold: wall_thickness = 10, gate_diameter = 1.0, sprue_diameter = 3.2, pour_cone_diameter = 7,
-pour_cone_depth = 4, vent_diameter = 0.8, key_diameter = 4, key_height = 2, key_taper = 10°,
-key_clearance = 0.2, bolts = false, bolt_diameter = 3.4, bolt_spacing = 25 (mm),
-shrink_scale = 1.0, flip = false, min_draft = 1°";
+/// Gaussian blur σ of an image profile (mm).
+pub const BLUR_MM: (f64, f64) = (0.0, 20.0);
 
 #[derive(Debug, Error)]
 pub enum SpecError {
@@ -128,7 +121,7 @@ pub fn describe_mold_error(file: &str, e: &MoldError) -> String {
 
 // ---- the file format ------------------------------------------------------
 
-#[derive(Deserialize, Debug, Default)]
+#[derive(Deserialize, Serialize, Debug, Default)]
 #[serde(deny_unknown_fields)]
 struct SpecFile {
     #[serde(default)]
@@ -147,7 +140,7 @@ struct SpecFile {
     mold: MoldTable,
 }
 
-#[derive(Deserialize, Debug, Clone, Copy, PartialEq)]
+#[derive(Deserialize, Serialize, Debug, Clone, Copy, PartialEq)]
 #[serde(rename_all = "kebab-case")]
 enum SurfaceKind {
     Plane,
@@ -158,7 +151,7 @@ enum SurfaceKind {
     Formula,
 }
 
-#[derive(Deserialize, Debug)]
+#[derive(Deserialize, Serialize, Debug)]
 #[serde(deny_unknown_fields, default)]
 struct SurfaceTable {
     kind: SurfaceKind,
@@ -175,7 +168,7 @@ impl Default for SurfaceTable {
     }
 }
 
-#[derive(Deserialize, Debug)]
+#[derive(Deserialize, Serialize, Debug)]
 #[serde(deny_unknown_fields, default)]
 struct LayoutTable {
     width: f64,
@@ -192,7 +185,7 @@ impl Default for LayoutTable {
     }
 }
 
-#[derive(Deserialize, Debug, Clone, Copy)]
+#[derive(Deserialize, Serialize, Debug, Clone, Copy)]
 #[serde(rename_all = "kebab-case")]
 enum RuleKey {
     ConstantAfov,
@@ -212,7 +205,7 @@ pub const MATERIALS: &[(&str, f64, &str)] = &[
     ("epoxy", 1.55, "typical clear casting epoxy"),
 ];
 
-#[derive(Deserialize, Debug)]
+#[derive(Deserialize, Serialize, Debug)]
 #[serde(deny_unknown_fields, default)]
 struct LensTable {
     afov: f64,
@@ -231,21 +224,21 @@ impl Default for LensTable {
     }
 }
 
-#[derive(Deserialize, Debug, Clone, Copy, PartialEq)]
+#[derive(Deserialize, Serialize, Debug, Clone, Copy, PartialEq)]
 #[serde(rename_all = "kebab-case")]
 enum BaseKind {
     DualLens,
     Printed,
 }
 
-#[derive(Deserialize, Debug, Clone)]
+#[derive(Deserialize, Serialize, Debug, Clone)]
 #[serde(untagged)]
 enum Distance {
     Mm(f64),
     Named(String),
 }
 
-#[derive(Deserialize, Debug)]
+#[derive(Deserialize, Serialize, Debug)]
 #[serde(deny_unknown_fields, default)]
 struct BaseTable {
     kind: BaseKind,
@@ -272,7 +265,7 @@ impl Default for BaseTable {
     }
 }
 
-#[derive(Deserialize, Debug, Clone, Copy, PartialEq)]
+#[derive(Deserialize, Serialize, Debug, Clone, Copy, PartialEq)]
 #[serde(rename_all = "kebab-case")]
 enum ProfileKind {
     Image,
@@ -282,14 +275,14 @@ enum ProfileKind {
     Flat,
 }
 
-#[derive(Deserialize, Debug, Clone, Copy, PartialEq)]
+#[derive(Deserialize, Serialize, Debug, Clone, Copy, PartialEq)]
 #[serde(rename_all = "kebab-case")]
 enum ModeKey {
     Gray,
     Shape,
 }
 
-#[derive(Deserialize, Debug)]
+#[derive(Deserialize, Serialize, Debug)]
 #[serde(deny_unknown_fields, default)]
 struct ProfileTable {
     kind: Option<ProfileKind>,
@@ -318,7 +311,7 @@ impl Default for ProfileTable {
     }
 }
 
-#[derive(Deserialize, Debug)]
+#[derive(Deserialize, Serialize, Debug)]
 #[serde(deny_unknown_fields, default)]
 struct MeshTable {
     tolerance: f64,
@@ -331,7 +324,7 @@ impl Default for MeshTable {
 
 /// `[mold]`: every dimension of the two-piece mold (METHOD §6), in mm and
 /// degrees. Defaults are `MoldParams::default()`.
-#[derive(Deserialize, Debug)]
+#[derive(Deserialize, Serialize, Debug)]
 #[serde(deny_unknown_fields, default)]
 struct MoldTable {
     wall_thickness: f64,
@@ -395,6 +388,19 @@ impl MoldTable {
             min_draft_deg: self.min_draft,
         }
     }
+}
+
+/// The default of every key that has a value of its own, as TOML text,
+/// read off the tables' `Default`s: `"lens.afov"` → `"60.0"`.
+pub(crate) fn default_values() -> std::collections::BTreeMap<String, String> {
+    let value = toml::Value::try_from(SpecFile::default()).expect("the defaults serialise");
+    let mut out = std::collections::BTreeMap::new();
+    for (table, keys) in value.as_table().expect("a table of tables") {
+        for (key, v) in keys.as_table().expect("each table is a table") {
+            out.insert(format!("{table}.{key}"), v.to_string());
+        }
+    }
+    out
 }
 
 // ---- loading --------------------------------------------------------------
@@ -486,245 +492,22 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         file: file.to_owned(),
         message: e.to_string().trim_end().to_owned(),
     })?;
-
-    // surface
-    let s = &raw.surface;
-    let radius = finite(file, "surface.radius", s.radius)?;
-    if s.z.is_some() && s.kind != SurfaceKind::Formula {
-        return Err(invalid(
-            file,
-            "surface.z",
-            format!("{:?}", s.z.as_deref().unwrap_or("")),
-            "is only used with kind = \"formula\"",
-            "set surface.kind = \"formula\" or remove surface.z",
-        ));
-    }
-    let surface = match s.kind {
-        SurfaceKind::Plane => PitchSurface::Plane,
-        SurfaceKind::Saddle => PitchSurface::Saddle { radius },
-        SurfaceKind::Paraboloid => PitchSurface::Paraboloid { radius },
-        SurfaceKind::Cylinder => PitchSurface::Cylinder { radius },
-        SurfaceKind::Sphere => PitchSurface::Sphere { radius },
-        SurfaceKind::Formula => {
-            let z = s.z.as_deref().ok_or_else(|| {
-                invalid(
-                    file,
-                    "surface.z",
-                    "(missing)",
-                    "kind = \"formula\" needs z = h(x, y), in mm",
-                    "add e.g. z = \"(x*x - y*y)/120\"",
-                )
-            })?;
-            PitchSurface::Formula(moirecast_kernel::surface::FormulaSurface::parse(z).map_err(
-                |e| {
-                    invalid(
-                        file,
-                        "surface.z",
-                        format!("{z:?}"),
-                        format!("is not a formula in x and y: {e}"),
-                        "use x, y, numbers, + - * / ^ and sin, cos, exp, sqrt…",
-                    )
-                },
-            )?)
-        }
-    };
-
-    // lens material
-    let index = match (&raw.lens.index, &raw.lens.material) {
-        (Some(i), _) => finite(file, "lens.index", *i)?,
-        (None, Some(m)) => MATERIALS
-            .iter()
-            .find(|(n, ..)| n == m)
-            .map(|(_, i, _)| *i)
-            .ok_or_else(|| {
-                let names: Vec<&str> = MATERIALS.iter().map(|(n, ..)| *n).collect();
-                invalid(
-                    file,
-                    "lens.material",
-                    format!("{m:?}"),
-                    format!("is not a known material ({})", names.join(", ")),
-                    "use one of those, or give lens.index",
-                )
-            })?,
-        (None, None) => 1.41,
-    };
-
-    let base_kind = match raw.base.kind {
-        BaseKind::DualLens => {
-            let printed_only = [
-                ("base.duty", raw.base.duty),
-                ("base.band_thickness", raw.base.band_thickness),
-                ("base.backing", raw.base.backing),
-            ];
-            if let Some((key, Some(v))) = printed_only.into_iter().find(|(_, v)| v.is_some()) {
-                return Err(invalid(
-                    file,
-                    key,
-                    v,
-                    "only a printed base has bands",
-                    "remove it, or set base.kind = \"printed\"",
-                ));
-            }
-            moirecast_kernel::BaseKind::DualLens
-        }
-        BaseKind::Printed => {
-            if let Some(afov) = raw.base.afov {
-                return Err(invalid(
-                    file,
-                    "base.afov",
-                    afov,
-                    "a printed base has no lenses",
-                    "remove it, or set base.kind = \"dual-lens\"",
-                ));
-            }
-            let defaults = PrintedBase::default();
-            let key = |key: &'static str, v: Option<f64>, default: f64| {
-                v.map_or(Ok(default), |v| finite(file, key, v))
-            };
-            moirecast_kernel::BaseKind::Printed(PrintedBase {
-                duty: key("base.duty", raw.base.duty, defaults.duty)?,
-                band_thickness: key(
-                    "base.band_thickness",
-                    raw.base.band_thickness,
-                    defaults.band_thickness,
-                )?,
-                backing: key("base.backing", raw.base.backing, defaults.backing)?,
-            })
-        }
-    };
-    let d = match &raw.base.d {
-        Distance::Mm(d) => Some(finite(file, "base.d", *d)?),
-        Distance::Named(n) if n == "focal" => None,
-        Distance::Named(n) => {
-            return Err(invalid(
-                file,
-                "base.d",
-                format!("{n:?}"),
-                "must be a distance in mm or \"focal\"",
-                "write d = \"focal\" or a number",
-            ))
-        }
-    };
+    let surface = surface(file, &raw.surface)?;
+    let index = lens_index(file, &raw.lens)?;
+    let base_kind = base_kind(file, &raw.base)?;
+    let d = base_d(file, &raw.base.d)?;
     let afov = finite(file, "lens.afov", raw.lens.afov)?.to_radians();
     let base_afov = raw
         .base
         .afov
         .map(|a| finite(file, "base.afov", a).map(f64::to_radians))
         .transpose()?;
-
-    // profile
     let layout = &raw.layout;
     let (w, h) = (
         finite(file, "layout.width", layout.width)?,
         finite(file, "layout.height", layout.height)?,
     );
-    let p = &raw.profile;
-    let blur = finite(file, "profile.blur", p.blur)?;
-    if !(0.0..=20.0).contains(&blur) {
-        return Err(invalid(
-            file,
-            "profile.blur",
-            blur,
-            "must be between 0 and 20 mm",
-            "1 mm suits a 0.5 mm period",
-        ));
-    }
-    let kind = match (p.kind, &p.image) {
-        (None, Some(_)) | (Some(ProfileKind::Image), Some(_)) => ProfileKind::Image,
-        (Some(ProfileKind::Image), None) => {
-            return Err(invalid(
-                file,
-                "profile.image",
-                "(missing)",
-                "kind = \"image\" needs an image",
-                "add image = \"profiles/horse.png\"",
-            ))
-        }
-        (Some(k), Some(img)) => {
-            return Err(invalid(
-                file,
-                "profile.image",
-                format!("{img:?}"),
-                format!("is given together with kind = {k:?}"),
-                "remove one of profile.kind and profile.image",
-            ))
-        }
-        (Some(k), None) => k,
-        (None, None) => ProfileKind::Rings,
-    };
-    let positive = |key: &'static str, v: f64| -> Result<f64, SpecError> {
-        finite(file, key, v)?;
-        if v <= 0.0 {
-            return Err(invalid(
-                file,
-                key,
-                v,
-                "must be positive",
-                "give a length in mm",
-            ));
-        }
-        Ok(v)
-    };
-    let (profile, profile_source) = match kind {
-        ProfileKind::Flat => (Profile::Flat, "flat".to_string()),
-        ProfileKind::Rings => {
-            let wl = positive("profile.wavelength", p.wavelength.unwrap_or(w.min(h) / 4.0))?;
-            (
-                Profile::Rings { wavelength: wl },
-                format!("rings (wavelength {wl} mm)"),
-            )
-        }
-        ProfileKind::Ramp => (
-            Profile::ramp(finite(file, "profile.angle", p.angle)?.to_radians(), w, h),
-            format!("ramp ({}°)", p.angle),
-        ),
-        ProfileKind::Bump => {
-            let s = positive("profile.sigma", p.sigma.unwrap_or(w.min(h) / 6.0))?;
-            (Profile::Bump { sigma: s }, format!("bump (sigma {s} mm)"))
-        }
-        ProfileKind::Image => {
-            let name = p.image.clone().unwrap_or_default();
-            let threshold = finite(file, "profile.threshold", p.threshold)?;
-            if !(0.0..=1.0).contains(&threshold) || threshold == 0.0 {
-                return Err(invalid(
-                    file,
-                    "profile.threshold",
-                    threshold,
-                    "must be in (0, 1]",
-                    "0.5 splits dark from light",
-                ));
-            }
-            let raster = read_raster(file, &name, &images)?;
-            let mode = match p.mode {
-                ModeKey::Gray => ProfileMode::Gray,
-                ModeKey::Shape => ProfileMode::Shape { threshold },
-            };
-            if w <= 0.0 || h <= 0.0 {
-                return Err(invalid(
-                    file,
-                    "layout.width",
-                    w,
-                    "the layout must have a positive size",
-                    "give width and height in mm",
-                ));
-            }
-            let sampled = SampledProfile::from_raster(&raster, mode, p.invert, blur, w, h)
-                .map_err(|e| {
-                    invalid(
-                        file,
-                        "profile.image",
-                        format!("{name:?}"),
-                        e,
-                        "check profile.threshold and profile.invert",
-                    )
-                })?;
-            (
-                Profile::Sampled(sampled),
-                format!("{name} ({:?}, blur {blur} mm)", p.mode).to_lowercase(),
-            )
-        }
-    };
-
+    let (profile, profile_source) = profile(file, &raw.profile, (w, h), &images)?;
     let params = DesignParams {
         surface,
         width: w,
@@ -768,6 +551,250 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         origin: file.to_owned(),
         profile_source,
         material: raw.lens.material.clone(),
+    })
+}
+
+/// The pitch surface of `[surface]`.
+fn surface(file: &str, s: &SurfaceTable) -> Result<PitchSurface, SpecError> {
+    let radius = finite(file, "surface.radius", s.radius)?;
+    if s.z.is_some() && s.kind != SurfaceKind::Formula {
+        return Err(invalid(
+            file,
+            "surface.z",
+            format!("{:?}", s.z.as_deref().unwrap_or("")),
+            "is only used with kind = \"formula\"",
+            "set surface.kind = \"formula\" or remove surface.z",
+        ));
+    }
+    Ok(match s.kind {
+        SurfaceKind::Plane => PitchSurface::Plane,
+        SurfaceKind::Saddle => PitchSurface::Saddle { radius },
+        SurfaceKind::Paraboloid => PitchSurface::Paraboloid { radius },
+        SurfaceKind::Cylinder => PitchSurface::Cylinder { radius },
+        SurfaceKind::Sphere => PitchSurface::Sphere { radius },
+        SurfaceKind::Formula => {
+            let z = s.z.as_deref().ok_or_else(|| {
+                invalid(
+                    file,
+                    "surface.z",
+                    "(missing)",
+                    "kind = \"formula\" needs z = h(x, y), in mm",
+                    "add e.g. z = \"(x*x - y*y)/120\"",
+                )
+            })?;
+            PitchSurface::Formula(moirecast_kernel::surface::FormulaSurface::parse(z).map_err(
+                |e| {
+                    invalid(
+                        file,
+                        "surface.z",
+                        format!("{z:?}"),
+                        format!("is not a formula in x and y: {e}"),
+                        "use x, y, numbers, + - * / ^ and sin, cos, exp, sqrt…",
+                    )
+                },
+            )?)
+        }
+    })
+}
+
+/// The refractive index: `lens.index`, or `lens.material`'s, or 1.41.
+fn lens_index(file: &str, lens: &LensTable) -> Result<f64, SpecError> {
+    Ok(match (&lens.index, &lens.material) {
+        (Some(i), _) => finite(file, "lens.index", *i)?,
+        (None, Some(m)) => MATERIALS
+            .iter()
+            .find(|(n, ..)| n == m)
+            .map(|(_, i, _)| *i)
+            .ok_or_else(|| {
+                let names: Vec<&str> = MATERIALS.iter().map(|(n, ..)| *n).collect();
+                invalid(
+                    file,
+                    "lens.material",
+                    format!("{m:?}"),
+                    format!("is not a known material ({})", names.join(", ")),
+                    "use one of those, or give lens.index",
+                )
+            })?,
+        (None, None) => 1.41,
+    })
+}
+
+/// The base's kind, with a printed base's band keys.
+fn base_kind(file: &str, base: &BaseTable) -> Result<moirecast_kernel::BaseKind, SpecError> {
+    Ok(match base.kind {
+        BaseKind::DualLens => {
+            let printed_only = [
+                ("base.duty", base.duty),
+                ("base.band_thickness", base.band_thickness),
+                ("base.backing", base.backing),
+            ];
+            if let Some((key, Some(v))) = printed_only.into_iter().find(|(_, v)| v.is_some()) {
+                return Err(invalid(
+                    file,
+                    key,
+                    v,
+                    "only a printed base has bands",
+                    "remove it, or set base.kind = \"printed\"",
+                ));
+            }
+            moirecast_kernel::BaseKind::DualLens
+        }
+        BaseKind::Printed => {
+            if let Some(afov) = base.afov {
+                return Err(invalid(
+                    file,
+                    "base.afov",
+                    afov,
+                    "a printed base has no lenses",
+                    "remove it, or set base.kind = \"dual-lens\"",
+                ));
+            }
+            let defaults = PrintedBase::default();
+            let key = |key: &'static str, v: Option<f64>, default: f64| {
+                v.map_or(Ok(default), |v| finite(file, key, v))
+            };
+            moirecast_kernel::BaseKind::Printed(PrintedBase {
+                duty: key("base.duty", base.duty, defaults.duty)?,
+                band_thickness: key(
+                    "base.band_thickness",
+                    base.band_thickness,
+                    defaults.band_thickness,
+                )?,
+                backing: key("base.backing", base.backing, defaults.backing)?,
+            })
+        }
+    })
+}
+
+/// `base.d`: a distance in mm, or `None` for "focal" (D_s).
+fn base_d(file: &str, d: &Distance) -> Result<Option<f64>, SpecError> {
+    Ok(match d {
+        Distance::Mm(d) => Some(finite(file, "base.d", *d)?),
+        Distance::Named(n) if n == "focal" => None,
+        Distance::Named(n) => {
+            return Err(invalid(
+                file,
+                "base.d",
+                format!("{n:?}"),
+                "must be a distance in mm or \"focal\"",
+                "write d = \"focal\" or a number",
+            ))
+        }
+    })
+}
+
+/// The elevation profile of `[profile]` on a layout of `w` × `h` mm, and
+/// how the report names its source.
+fn profile(
+    file: &str,
+    p: &ProfileTable,
+    (w, h): (f64, f64),
+    images: &ImageSource,
+) -> Result<(Profile, String), SpecError> {
+    let blur = finite(file, "profile.blur", p.blur)?;
+    if !(BLUR_MM.0..=BLUR_MM.1).contains(&blur) {
+        return Err(invalid(
+            file,
+            "profile.blur",
+            blur,
+            format!("must be between {} and {} mm", BLUR_MM.0, BLUR_MM.1),
+            "1 mm suits a 0.5 mm period",
+        ));
+    }
+    let kind = match (p.kind, &p.image) {
+        (None, Some(_)) | (Some(ProfileKind::Image), Some(_)) => ProfileKind::Image,
+        (Some(ProfileKind::Image), None) => {
+            return Err(invalid(
+                file,
+                "profile.image",
+                "(missing)",
+                "kind = \"image\" needs an image",
+                "add image = \"profiles/horse.png\"",
+            ))
+        }
+        (Some(k), Some(img)) => {
+            return Err(invalid(
+                file,
+                "profile.image",
+                format!("{img:?}"),
+                format!("is given together with kind = {k:?}"),
+                "remove one of profile.kind and profile.image",
+            ))
+        }
+        (Some(k), None) => k,
+        (None, None) => ProfileKind::Rings,
+    };
+    let positive = |key: &'static str, v: f64| -> Result<f64, SpecError> {
+        finite(file, key, v)?;
+        if v <= 0.0 {
+            return Err(invalid(
+                file,
+                key,
+                v,
+                "must be positive",
+                "give a length in mm",
+            ));
+        }
+        Ok(v)
+    };
+    Ok(match kind {
+        ProfileKind::Flat => (Profile::Flat, "flat".to_string()),
+        ProfileKind::Rings => {
+            let wl = positive("profile.wavelength", p.wavelength.unwrap_or(w.min(h) / 4.0))?;
+            (
+                Profile::Rings { wavelength: wl },
+                format!("rings (wavelength {wl} mm)"),
+            )
+        }
+        ProfileKind::Ramp => (
+            Profile::ramp(finite(file, "profile.angle", p.angle)?.to_radians(), w, h),
+            format!("ramp ({}°)", p.angle),
+        ),
+        ProfileKind::Bump => {
+            let s = positive("profile.sigma", p.sigma.unwrap_or(w.min(h) / 6.0))?;
+            (Profile::Bump { sigma: s }, format!("bump (sigma {s} mm)"))
+        }
+        ProfileKind::Image => {
+            let name = p.image.clone().unwrap_or_default();
+            let threshold = finite(file, "profile.threshold", p.threshold)?;
+            if !(0.0..=1.0).contains(&threshold) || threshold == 0.0 {
+                return Err(invalid(
+                    file,
+                    "profile.threshold",
+                    threshold,
+                    "must be in (0, 1]",
+                    "0.5 splits dark from light",
+                ));
+            }
+            let raster = read_raster(file, &name, images)?;
+            let mode = match p.mode {
+                ModeKey::Gray => ProfileMode::Gray,
+                ModeKey::Shape => ProfileMode::Shape { threshold },
+            };
+            if w <= 0.0 || h <= 0.0 {
+                return Err(invalid(
+                    file,
+                    "layout.width",
+                    w,
+                    "the layout must have a positive size",
+                    "give width and height in mm",
+                ));
+            }
+            let sampled = SampledProfile::from_raster(&raster, mode, p.invert, blur, w, h)
+                .map_err(|e| {
+                    invalid(
+                        file,
+                        "profile.image",
+                        format!("{name:?}"),
+                        e,
+                        "check profile.threshold and profile.invert",
+                    )
+                })?;
+            (
+                Profile::Sampled(sampled),
+                format!("{name} ({:?}, blur {blur} mm)", p.mode).to_lowercase(),
+            )
+        }
     })
 }
 

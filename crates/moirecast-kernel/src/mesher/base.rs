@@ -388,9 +388,8 @@ fn lens_interior(
                 }
                 v -= r / (jm + km * (v - vm));
             }
-            let p = found.ok_or_else(|| {
-                KernelError::Solver(format!("base lens {k} at t = {t}, y = {y}"))
-            })?;
+            let p = found
+                .ok_or_else(|| KernelError::Solver(format!("base lens {k} at t = {t}, y = {y}")))?;
             out.push((p, VertexOrigin::BaseLens { k, t, v }));
         }
     }

@@ -53,11 +53,21 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
         wall_part.0.len(),
     ];
     let (mut tris, mut patches) = (Vec::new(), Vec::new());
-    for (t, p) in revealer_parts.into_iter().chain(base_parts).chain([wall_part]) {
+    for (t, p) in revealer_parts
+        .into_iter()
+        .chain(base_parts)
+        .chain([wall_part])
+    {
         tris.extend(t);
         patches.extend(p);
     }
-    dm.stats = stats(design, &plan, (&base_ys, &base_rows), dm.mesh.positions.len(), counts);
+    dm.stats = stats(
+        design,
+        &plan,
+        (&base_ys, &base_rows),
+        dm.mesh.positions.len(),
+        counts,
+    );
     dm.mesh.triangles = tris;
     dm.patches = patches;
     Ok(dm)
@@ -74,9 +84,8 @@ fn with_vertices(
     let hh = design.half_height;
     let row_len = plan.revealer_columns.iter().sum::<usize>() + 1;
     let rev_count = plan.revealer_rows.len() * row_len;
-    let mut positions = Vec::with_capacity(
-        rev_count + base_rows.iter().map(|r| r.positions.len()).sum::<usize>(),
-    );
+    let mut positions =
+        Vec::with_capacity(rev_count + base_rows.iter().map(|r| r.positions.len()).sum::<usize>());
     let mut origins = Vec::with_capacity(positions.capacity());
     for row in revealer {
         for (p, o) in row {

@@ -45,9 +45,30 @@ pub(super) fn strips(dm: &DeviceMesh, base_rows: &[BaseRow], base_offsets: &[u32
     let front_bottom = row_span(0);
     let back_bottom = row_span(base_rows.len() - 1);
     for (bottom, top, key, flip, side, outward) in [
-        (&left_bottom, &left_top, &key_y as &dyn Fn(u32) -> f64, true, Side::Left, DVec3::NEG_X),
-        (&right_bottom, &right_top, &key_y, false, Side::Right, DVec3::X),
-        (&front_bottom, &front_top, &key_x, false, Side::Front, DVec3::NEG_Y),
+        (
+            &left_bottom,
+            &left_top,
+            &key_y as &dyn Fn(u32) -> f64,
+            true,
+            Side::Left,
+            DVec3::NEG_X,
+        ),
+        (
+            &right_bottom,
+            &right_top,
+            &key_y,
+            false,
+            Side::Right,
+            DVec3::X,
+        ),
+        (
+            &front_bottom,
+            &front_top,
+            &key_x,
+            false,
+            Side::Front,
+            DVec3::NEG_Y,
+        ),
         (&back_bottom, &back_top, &key_x, true, Side::Back, DVec3::Y),
     ] {
         zip(
