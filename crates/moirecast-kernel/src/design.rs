@@ -234,6 +234,59 @@ fn in_range(
 
 impl Design {
     pub fn new(p: DesignParams) -> Result<Design, DesignError> {
+        let (n, index, base_afov) = Self::check_ranges(&p)?;
+        let standard = StandardLens::new(p.period, p.lens.afov, index);
+        let (d, tolerance) = Self::depth_and_tolerance(&p, &standard)?;
+        let revealer_rule = match p.lens.rule {
+            LensRule::ConstantAfov => ArcRule::ConstantAfov {
+                half_angle: p.lens.afov / 2.0,
+            },
+            LensRule::EqualRadius => ArcRule::EqualRadius {
+                radius: standard.radius,
+            },
+        };
+        let base_rule = ArcRule::ConstantAfov {
+            half_angle: base_afov / 2.0,
+        };
+        let n = n as usize;
+        let provisional_margin = d + (p.base.levels + 2.0) * p.period;
+        let mut design = Design {
+            tolerance,
+            lenses: n,
+            d,
+            revealer_rule,
+            base_rule,
+            outline_x: (0.0, 0.0),
+            half_height: p.height / 2.0,
+            margin: provisional_margin,
+            base_creases: (0, 0),
+            max_curvature: 0.0,
+            max_slope: 0.0,
+            standard,
+            params: p,
+        };
+        design.outline_x = (
+            design.surface().x_of_u(design.crease_u(0)),
+            design.surface().x_of_u(design.crease_u(n as i64)),
+        );
+        design.settle_margin(base_afov)?;
+        design.validate_profile()?;
+        // Base creases that can reach the extended layout: φ = (u + W/2 − E)/T, E ∈ [0, A·T].
+        let a_t = design.params.base.levels * design.params.period;
+        let t = design.params.period;
+        let k_lo = ((-design.margin - 1.5 * a_t) / t).floor() as i64 - 1;
+        let k_hi = ((design.params.width + design.margin + 0.5 * a_t) / t).ceil() as i64 + 1;
+        // a printed base has two band edges per period: φ = k and φ = k + duty
+        design.base_creases = match design.params.base.kind {
+            BaseKind::DualLens => (k_lo, k_hi),
+            BaseKind::Printed(_) => (2 * k_lo, 2 * k_hi),
+        };
+        Ok(design)
+    }
+
+    /// Every parameter against its own range: the lens count N, the
+    /// index and the base lenses' AFOV.
+    fn check_ranges(p: &DesignParams) -> Result<(f64, f64, f64), DesignError> {
         use limits::*;
         let deg = |r: f64| r.to_degrees();
         in_range(
@@ -347,7 +400,15 @@ impl Design {
                 "1 mm is the default",
             )?;
         }
-        let standard = StandardLens::new(p.period, p.lens.afov, index);
+        Ok((n, index, base_afov))
+    }
+
+    /// The offset distance d actually used and the mesh tolerance, with
+    /// the surface's radius checked.
+    fn depth_and_tolerance(
+        p: &DesignParams,
+        standard: &StandardLens,
+    ) -> Result<(f64, Tolerance), DesignError> {
         let d = match p.base.d {
             None => standard.focal_depth,
             Some(d) => {
@@ -404,74 +465,35 @@ impl Design {
                 }
             }
         }
-        let revealer_rule = match p.lens.rule {
-            LensRule::ConstantAfov => ArcRule::ConstantAfov {
-                half_angle: p.lens.afov / 2.0,
-            },
-            LensRule::EqualRadius => ArcRule::EqualRadius {
-                radius: standard.radius,
-            },
-        };
-        let base_rule = ArcRule::ConstantAfov {
-            half_angle: base_afov / 2.0,
-        };
-        let n = n as usize;
-        let provisional_margin = d + (p.base.levels + 2.0) * p.period;
-        let mut design = Design {
-            tolerance,
-            lenses: n,
-            d,
-            revealer_rule,
-            base_rule,
-            outline_x: (0.0, 0.0),
-            half_height: h / 2.0,
-            margin: provisional_margin,
-            base_creases: (0, 0),
-            max_curvature: 0.0,
-            max_slope: 0.0,
-            standard,
-            params: p,
-        };
-        design.outline_x = (
-            design.surface().x_of_u(design.crease_u(0)),
-            design.surface().x_of_u(design.crease_u(n as i64)),
-        );
-        // The base lies up to d_eff below f, so the surface is needed (and
-        // validated) over a margin around the layout that depends on d_eff,
-        // which with a > 0 depends on the surface out there: grow the margin
-        // until the validated region covers the base it finds.
+        Ok((d, tolerance))
+    }
+
+    /// The base lies up to d_eff below f, so the surface is needed (and
+    /// validated) over a margin around the layout that depends on d_eff,
+    /// which with a > 0 depends on the surface out there: grows the margin
+    /// until the validated region covers the base it finds.
+    fn settle_margin(&mut self, base_afov: f64) -> Result<(), DesignError> {
         let mut covered = false;
         for _ in 0..6 {
-            let validated = design.margin;
-            design.validate_surface(base_afov)?;
-            if design.margin <= validated {
-                design.margin = validated;
+            let validated = self.margin;
+            self.validate_surface(base_afov)?;
+            if self.margin <= validated {
+                self.margin = validated;
                 covered = true;
                 break;
             }
             // validate a padded region next, so the search settles quickly
-            design.margin *= 1.25;
+            self.margin *= 1.25;
         }
         if !covered {
             return Err(err(
                 Param::BaseA,
-                design.params.base.a,
-                format!("the focal surface keeps moving away from the layout as the layout grows (base depth over {:.1} mm)", design.margin),
+                self.params.base.a,
+                format!("the focal surface keeps moving away from the layout as the layout grows (base depth over {:.1} mm)", self.margin),
                 "use a smaller a, or a flatter surface",
             ));
         }
-        design.validate_profile()?;
-        // Base creases that can reach the extended layout: φ = (u + W/2 − E)/T, E ∈ [0, A·T].
-        let a_t = design.params.base.levels * design.params.period;
-        let t = design.params.period;
-        let k_lo = ((-design.margin - 1.5 * a_t) / t).floor() as i64 - 1;
-        let k_hi = ((w + design.margin + 0.5 * a_t) / t).ceil() as i64 + 1;
-        // a printed base has two band edges per period: φ = k and φ = k + duty
-        design.base_creases = match design.params.base.kind {
-            BaseKind::DualLens => (k_lo, k_hi),
-            BaseKind::Printed(_) => (2 * k_lo, 2 * k_hi),
-        };
-        Ok(design)
+        Ok(())
     }
 
     pub fn surface(&self) -> &PitchSurface {
