@@ -333,8 +333,50 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
             detail: "the design's base is not printed".into(),
         });
     };
-    let tris = &dm.mesh.triangles;
-    let pos = &dm.mesh.positions;
+    let (s_faces, on_s, repair) = faces_of_s(design, dm)?;
+    let walk = Walk {
+        design,
+        dm,
+        pb: &pb,
+        s_faces: &s_faces,
+    };
+    // The three bodies are built side by side, each from the same walk over
+    // s, so each numbers its vertices in the same first-use order as one
+    // walk building all three would.
+    let ((clear, clear_on_band), (black, slab)) = rayon::join(
+        || walk.clear(),
+        || rayon::join(|| walk.black(), || walk.slab()),
+    );
+    let areas = band_areas(design, &dm.mesh.positions, &s_faces);
+    let (bands, caps) = shells_and_caps(&black.mesh, &black.origin, &on_s);
+    let clear_genus = caps.iter().map(|&c| c.saturating_sub(1)).sum();
+    Ok(PrintedBodies {
+        clear_faces: clear.faces,
+        black_faces: black.faces,
+        clear_vertices: clear.origin,
+        black_vertices: black.origin,
+        clear: clear.mesh,
+        clear_on_band,
+        wall_touches: repair,
+        black: black.mesh,
+        slab: slab.mesh,
+        bands,
+        clear_genus,
+        layer_area: areas[0],
+        black_area: areas[1],
+        layer_area_whole: areas[2],
+        black_area_whole: areas[3],
+    })
+}
+
+/// s's triangles with their sections and neighbours' colours, after the
+/// band edges that touch a wall are repaired; the map of s's edges; the
+/// repairs.
+fn faces_of_s(
+    design: &Design,
+    dm: &DeviceMesh,
+) -> Result<(Vec<SFace>, EdgeMap<bool>, WallTouches)> {
+    let (tris, pos) = (&dm.mesh.triangles, &dm.mesh.positions);
     // s's triangles and the band each lies in
     let band_of = |ti: usize| match dm.patches[ti] {
         Patch::Lens(LensRef::Base(k)) => Some(design.is_black_band(k)),
@@ -351,18 +393,6 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
     }
     let mut on_s = EdgeMap::new(pos.len(), &s_tris);
     let repair = repair_wall_touches(design, pos, &mut s_tris, &mut on_s)?;
-    // what a vertical quad below edge a→b of s lies on
-    let band_side = |a: u32, b: u32| match (dm.origins[a as usize], dm.origins[b as usize]) {
-        (VertexOrigin::BaseCrease { k: c, .. }, VertexOrigin::BaseCrease { k: d, .. })
-            if c == d =>
-        {
-            BodyFace::BandSide { crease: c }
-        }
-        _ => BodyFace::Repaired,
-    };
-    let wall = |a: u32, b: u32| {
-        BodyFace::Wall(wall_side(design, 0.5 * (pos[a as usize] + pos[b as usize])))
-    };
     let s_faces: Vec<SFace> = s_tris
         .iter()
         .zip(&s_index)
@@ -379,49 +409,116 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
             }
         })
         .collect();
-    let section = |k, layer| BodyFace::Section { k, layer };
-    let edges = |t: [u32; 3]| (0..3).map(move |e| (t[e], t[(e + 1) % 3]));
-    // the revealer and the upper walls belong to the clear body and the slab
-    let upper = |body: &mut Body| {
-        for (ti, t) in tris.iter().enumerate() {
-            let face = match dm.patches[ti] {
+    Ok((s_faces, on_s, repair))
+}
+
+/// One walk over s that builds a body: what every body's faces come from.
+struct Walk<'a> {
+    design: &'a Design,
+    dm: &'a DeviceMesh,
+    pb: &'a PrintedBase,
+    s_faces: &'a [SFace],
+}
+
+impl Walk<'_> {
+    /// What a vertical quad below edge a→b of s lies on.
+    fn band_side(&self, a: u32, b: u32) -> BodyFace {
+        match (self.dm.origins[a as usize], self.dm.origins[b as usize]) {
+            (VertexOrigin::BaseCrease { k: c, .. }, VertexOrigin::BaseCrease { k: d, .. })
+                if c == d =>
+            {
+                BodyFace::BandSide { crease: c }
+            }
+            _ => BodyFace::Repaired,
+        }
+    }
+
+    fn wall(&self, a: u32, b: u32) -> BodyFace {
+        let pos = &self.dm.mesh.positions;
+        BodyFace::Wall(wall_side(
+            self.design,
+            0.5 * (pos[a as usize] + pos[b as usize]),
+        ))
+    }
+
+    /// The revealer and the upper walls: they belong to the clear body and
+    /// the slab.
+    fn upper(&self, body: &mut Body) {
+        for (ti, t) in self.dm.mesh.triangles.iter().enumerate() {
+            let face = match self.dm.patches[ti] {
                 Patch::Lens(LensRef::Revealer(i)) => BodyFace::Revealer(i),
                 Patch::Wall(side) => BodyFace::Wall(side),
                 Patch::Lens(LensRef::Base(_)) => continue,
             };
             body.triangle(*t, Layer::Top, false, face);
         }
-    };
-    // room for each body: the upper faces, each face of s at one or three
-    // layers, band sides (about one quad per face of s on the reference
-    // designs) and a margin
-    let upper_count = tris.len() - s_faces.len();
-    let black_count = s_faces.iter().filter(|f| f.is_black).count();
-    let (sides, margin) = (s_faces.len(), s_faces.len() / 8);
-    // The three bodies are built side by side, each from the same walk over
-    // s, so each numbers its vertices in the same first-use order as one
-    // walk building all three would.
-    let build_clear = || {
+    }
+
+    /// Room for the upper faces: the device's triangles not on s.
+    fn upper_count(&self) -> usize {
+        self.dm.mesh.triangles.len() - self.s_faces.len()
+    }
+
+    /// Room for band sides (about one quad per face of s on the reference
+    /// designs) and a margin.
+    fn sides_and_margin(&self) -> (usize, usize) {
+        (self.s_faces.len(), self.s_faces.len() / 8)
+    }
+
+    fn black_count(&self) -> usize {
+        self.s_faces.iter().filter(|f| f.is_black).count()
+    }
+
+    /// The clear body, and per triangle whether it is a face it shares with
+    /// a band (which absorbs).
+    fn clear(&self) -> (Body<'_>, Vec<bool>) {
+        let (pos, pb) = (&self.dm.mesh.positions, self.pb);
+        let (upper_count, black_count) = (self.upper_count(), self.black_count());
+        let (sides, margin) = self.sides_and_margin();
         let mut clear = Body::new(
             pos,
-            &pb,
-            upper_count + s_faces.len() + 2 * black_count + sides + margin,
+            pb,
+            upper_count + self.s_faces.len() + 2 * black_count + sides + margin,
         );
         let mut on_band: Vec<bool> = Vec::new();
-        upper(&mut clear);
+        self.upper(&mut clear);
         for &SFace {
             t,
             is_black,
             k,
             across,
-        } in &s_faces
+        } in self.s_faces
         {
             // s faces down in the device mesh; the backing's bottom does too
-            clear.triangle(t, Layer::Bottom, false, section(k, Layer::Bottom));
+            clear.triangle(
+                t,
+                Layer::Bottom,
+                false,
+                BodyFace::Section {
+                    k,
+                    layer: Layer::Bottom,
+                },
+            );
             if is_black {
                 mark(&clear, &mut on_band, false);
-                clear.triangle(t, Layer::Top, false, section(k, Layer::Top));
-                clear.triangle(t, Layer::BandBottom, true, section(k, Layer::BandBottom));
+                clear.triangle(
+                    t,
+                    Layer::Top,
+                    false,
+                    BodyFace::Section {
+                        k,
+                        layer: Layer::Top,
+                    },
+                );
+                clear.triangle(
+                    t,
+                    Layer::BandBottom,
+                    true,
+                    BodyFace::Section {
+                        k,
+                        layer: Layer::BandBottom,
+                    },
+                );
                 mark(&clear, &mut on_band, true);
             }
             for (edge, other) in edges(t).zip(across) {
@@ -430,14 +527,14 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
                     Some(other) => {
                         if is_black && !other {
                             mark(&clear, &mut on_band, false);
-                            let side = band_side(edge.0, edge.1);
+                            let side = self.band_side(edge.0, edge.1);
                             clear.quad(edge, Layer::Top, Layer::BandBottom, true, side);
                             mark(&clear, &mut on_band, true);
                         }
                     }
                     // on the outline: the lower wall
                     None => {
-                        let w = wall(edge.0, edge.1);
+                        let w = self.wall(edge.0, edge.1);
                         if !is_black {
                             clear.quad(edge, Layer::Top, Layer::BandBottom, false, w);
                         }
@@ -448,50 +545,94 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
         }
         mark(&clear, &mut on_band, false);
         (clear, on_band)
-    };
-    let build_black = || {
-        let mut black = Body::new(pos, &pb, 2 * black_count + sides + margin);
+    }
+
+    /// The black bands.
+    fn black(&self) -> Body<'_> {
+        let (pos, pb) = (&self.dm.mesh.positions, self.pb);
+        let black_count = self.black_count();
+        let (sides, margin) = self.sides_and_margin();
+        let mut black = Body::new(pos, pb, 2 * black_count + sides + margin);
         for &SFace {
             t,
             is_black,
             k,
             across,
-        } in s_faces.iter().filter(|f| f.is_black)
+        } in self.s_faces.iter().filter(|f| f.is_black)
         {
-            black.triangle(t, Layer::Top, true, section(k, Layer::Top));
-            black.triangle(t, Layer::BandBottom, false, section(k, Layer::BandBottom));
+            black.triangle(
+                t,
+                Layer::Top,
+                true,
+                BodyFace::Section {
+                    k,
+                    layer: Layer::Top,
+                },
+            );
+            black.triangle(
+                t,
+                Layer::BandBottom,
+                false,
+                BodyFace::Section {
+                    k,
+                    layer: Layer::BandBottom,
+                },
+            );
             for (edge, other) in edges(t).zip(across) {
                 let face = match other {
                     Some(true) => continue,
-                    Some(false) => band_side(edge.0, edge.1),
-                    None => wall(edge.0, edge.1),
+                    Some(false) => self.band_side(edge.0, edge.1),
+                    None => self.wall(edge.0, edge.1),
                 };
                 debug_assert!(is_black);
                 black.quad(edge, Layer::Top, Layer::BandBottom, false, face);
             }
         }
         black
-    };
-    let build_slab = || {
-        let mut slab = Body::new(pos, &pb, upper_count + s_faces.len() + margin);
-        upper(&mut slab);
-        for &SFace { t, k, across, .. } in &s_faces {
-            slab.triangle(t, Layer::Bottom, false, section(k, Layer::Bottom));
+    }
+
+    /// The whole device, clear and black together, as one solid.
+    fn slab(&self) -> Body<'_> {
+        let (pos, pb) = (&self.dm.mesh.positions, self.pb);
+        let upper_count = self.upper_count();
+        let (_, margin) = self.sides_and_margin();
+        let mut slab = Body::new(pos, pb, upper_count + self.s_faces.len() + margin);
+        self.upper(&mut slab);
+        for &SFace { t, k, across, .. } in self.s_faces {
+            slab.triangle(
+                t,
+                Layer::Bottom,
+                false,
+                BodyFace::Section {
+                    k,
+                    layer: Layer::Bottom,
+                },
+            );
             for (edge, other) in edges(t).zip(across) {
                 if other.is_none() {
-                    slab.quad(edge, Layer::Top, Layer::Bottom, false, wall(edge.0, edge.1));
+                    slab.quad(
+                        edge,
+                        Layer::Top,
+                        Layer::Bottom,
+                        false,
+                        self.wall(edge.0, edge.1),
+                    );
                 }
             }
         }
         slab
-    };
-    let ((clear, clear_on_band), (black, slab)) =
-        rayon::join(build_clear, || rayon::join(build_black, build_slab));
+    }
+}
+
+/// The band layer's xy area and its black part, over the whole layer and
+/// over whole periods only (the walls cut the first and last period of
+/// each line anywhere): `[layer, black, layer whole, black whole]`.
+fn band_areas(design: &Design, pos: &[DVec3], s_faces: &[SFace]) -> [f64; 4] {
     let (mut layer_area, mut black_area) = (0.0, 0.0);
     // per period m: xy area of its band, of all of it, and whether it meets an x-wall
     let mut periods: std::collections::BTreeMap<i64, (f64, f64, bool)> = Default::default();
     let (xl, xr) = design.outline_x;
-    for &SFace { t, is_black, k, .. } in &s_faces {
+    for &SFace { t, is_black, k, .. } in s_faces {
         let area = xy_area(pos, &t);
         layer_area += area;
         let period = periods.entry(k.div_euclid(2)).or_default();
@@ -505,28 +646,15 @@ pub fn printed_bodies(design: &Design, dm: &DeviceMesh) -> Result<PrintedBodies>
             (x - xl).abs() <= WALL_SNAP_MM || (x - xr).abs() <= WALL_SNAP_MM
         });
     }
-    let (bands, caps) = shells_and_caps(&black.mesh, &black.origin, &on_s);
-    let clear_genus = caps.iter().map(|&c| c.saturating_sub(1)).sum();
     let whole = periods.values().filter(|p| !p.2);
     let (black_area_whole, layer_area_whole) =
         whole.fold((0.0, 0.0), |(b, l), p| (b + p.0, l + p.1));
-    Ok(PrintedBodies {
-        clear_faces: clear.faces,
-        black_faces: black.faces,
-        clear_vertices: clear.origin,
-        black_vertices: black.origin,
-        clear: clear.mesh,
-        clear_on_band,
-        wall_touches: repair,
-        black: black.mesh,
-        slab: slab.mesh,
-        bands,
-        clear_genus,
-        layer_area,
-        black_area,
-        layer_area_whole,
-        black_area_whole,
-    })
+    [layer_area, black_area, layer_area_whole, black_area_whole]
+}
+
+/// The edges a→b of triangle `t`, in order.
+fn edges(t: [u32; 3]) -> impl Iterator<Item = (u32, u32)> {
+    (0..3).map(move |e| (t[e], t[(e + 1) % 3]))
 }
 
 /// A triangle of s with its section and, per edge a→b, the colour of the
