@@ -65,31 +65,7 @@ pub fn split(
 ) -> Option<Split> {
     let k = region.device_faces.len();
     let pos = &region.mesh.positions;
-    let inside = shrunk(&posed.outline, CLEARANCE_MM);
-    let is_far: Vec<bool> = (0..k)
-        .into_par_iter()
-        .map(|i| {
-            if posed.faces[region.device_faces[i] as usize] != kind {
-                return false;
-            }
-            let [a, b, c] = region.mesh.triangles[i].map(|v| pos[v as usize]);
-            // Facing out of the region through the parting surface.
-            if (b - a).cross(c - a).z * side >= 0.0 {
-                return false;
-            }
-            let lo = a.min(b).min(c).truncate();
-            let hi = a.max(b).max(c).truncate();
-            let within =
-                lo.x > inside.x0 && hi.x < inside.x1 && lo.y > inside.y0 && hi.y < inside.y1;
-            within
-                && clear.iter().all(|&(cl, ch)| {
-                    lo.x > ch.x + CLEARANCE_MM
-                        || hi.x < cl.x - CLEARANCE_MM
-                        || lo.y > ch.y + CLEARANCE_MM
-                        || hi.y < cl.y - CLEARANCE_MM
-                })
-        })
-        .collect();
+    let is_far = far_faces(region, posed, (kind, side), clear);
     let far_count = is_far.iter().filter(|&&f| f).count();
     if (far_count as f64) < MIN_FAR_SHARE * k as f64 {
         return None;
@@ -145,14 +121,75 @@ pub fn split(
     near.triangles
         .extend_from_slice(&region.mesh.triangles[k..]);
     let first_interface = near.triangles.len();
-    // Curtains: over rim edge a→b of the patch, the near side holds a→b;
-    // the lid then holds a'→b' (the lid vertex over a to that over b).
+    let lid_of = curtains(&mut near, &rims, lid_z);
+    add_lid(&mut near, &rims, &lid_of)?;
+    let interface = near.triangles.len() - first_interface;
+    let thinnest = near.triangles[first_interface..]
+        .iter()
+        .map(|t| altitude(t.map(|v| near.positions[v as usize])))
+        .fold(f64::INFINITY, f64::min);
+    if thinnest < MIN_ALTITUDE_MM {
+        return None;
+    }
+    Some(Split {
+        near: compacted(near),
+        near_device_faces,
+        interface,
+        far,
+        far_device_faces,
+        rim: rims.concat(),
+    })
+}
+
+/// Which of the region's device faces (its first triangles) are far: of
+/// the cavity's `kind`, facing out of the region through the parting
+/// surface on `side`, inside the outline by the clearance, and clear of
+/// every box in `clear`.
+fn far_faces(
+    region: &Region,
+    posed: &PosedDevice,
+    (kind, side): (Face, f64),
+    clear: &[(DVec2, DVec2)],
+) -> Vec<bool> {
+    let k = region.device_faces.len();
+    let pos = &region.mesh.positions;
+    let inside = shrunk(&posed.outline, CLEARANCE_MM);
+    (0..k)
+        .into_par_iter()
+        .map(|i| {
+            if posed.faces[region.device_faces[i] as usize] != kind {
+                return false;
+            }
+            let [a, b, c] = region.mesh.triangles[i].map(|v| pos[v as usize]);
+            // Facing out of the region through the parting surface.
+            if (b - a).cross(c - a).z * side >= 0.0 {
+                return false;
+            }
+            let lo = a.min(b).min(c).truncate();
+            let hi = a.max(b).max(c).truncate();
+            let within =
+                lo.x > inside.x0 && hi.x < inside.x1 && lo.y > inside.y0 && hi.y < inside.y1;
+            within
+                && clear.iter().all(|&(cl, ch)| {
+                    lo.x > ch.x + CLEARANCE_MM
+                        || hi.x < cl.x - CLEARANCE_MM
+                        || lo.y > ch.y + CLEARANCE_MM
+                        || hi.y < cl.y - CLEARANCE_MM
+                })
+        })
+        .collect()
+}
+
+/// Curtains from every rim up to the lid height: over rim edge a→b of the
+/// patch, the near side holds a→b; the lid then holds a'→b' (the lid
+/// vertex over a to that over b). Returns each rim's first lid vertex.
+fn curtains(near: &mut Mesh, rims: &[Vec<u32>], lid_z: f64) -> Vec<u32> {
     let mut lid_of = Vec::with_capacity(rims.len());
-    for rim in &rims {
+    for rim in rims {
         let first = near.positions.len() as u32;
         let m = rim.len() as u32;
         for &v in rim {
-            let p = pos[v as usize];
+            let p = near.positions[v as usize];
             near.positions.push(DVec3::new(p.x, p.y, lid_z));
         }
         for (j, &a) in rim.iter().enumerate() {
@@ -164,13 +201,20 @@ pub fn split(
         }
         lid_of.push(first);
     }
-    // The lid: one polygon per rim, wound as the rims run (the outer one
-    // against the holes), handed to the ear clipper counter-clockwise.
+    lid_of
+}
+
+/// The lid over the curtains: one polygon per rim, wound as the rims run
+/// (the outer one against the holes), ear-clipped. `None` where the rims
+/// do not nest as an outer one and holes, or the lid would not cover the
+/// area between them exactly once.
+fn add_lid(near: &mut Mesh, rims: &[Vec<u32>], lid_of: &[u32]) -> Option<()> {
+    let n: usize = rims.iter().map(Vec::len).sum();
     let rings: Vec<Vec<Vec2>> = rims
         .iter()
         .map(|rim| {
             rim.iter()
-                .map(|&v| Vec2::new(pos[v as usize].x, pos[v as usize].y))
+                .map(|&v| Vec2::new(near.positions[v as usize].x, near.positions[v as usize].y))
                 .collect()
         })
         .collect();
@@ -187,7 +231,7 @@ pub fn split(
     let mut lid_vertex = Vec::with_capacity(n);
     let polygons: Vec<Vec<Vec2>> = rings
         .iter()
-        .zip(&lid_of)
+        .zip(lid_of)
         .map(|(ring, &first)| {
             let m = ring.len() as u32;
             if ccw {
@@ -226,22 +270,7 @@ pub fn split(
     if (lid_twice_area - twice_area).abs() > 1e-9 * twice_area.abs() {
         return None;
     }
-    let interface = near.triangles.len() - first_interface;
-    let thinnest = near.triangles[first_interface..]
-        .iter()
-        .map(|t| altitude(t.map(|v| near.positions[v as usize])))
-        .fold(f64::INFINITY, f64::min);
-    if thinnest < MIN_ALTITUDE_MM {
-        return None;
-    }
-    Some(Split {
-        near: compacted(near),
-        near_device_faces,
-        interface,
-        far,
-        far_device_faces,
-        rim: rims.concat(),
-    })
+    Some(())
 }
 
 impl Split {
