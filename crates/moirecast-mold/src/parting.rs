@@ -767,70 +767,22 @@ pub fn parting_region(
         PartSide::Above => (DVec3::NEG_Z, DVec3::Z),
         PartSide::Below => (DVec3::Z, DVec3::NEG_Z),
     };
-    let top_z = cap_z;
     let mut b = SolidBuilder::default();
-    let curve = |w: Wall| walls.iter().find(|c| c.wall == w).expect("four walls");
-    let on_wall = |w: Wall| -> &[DVec3] { &curve(w).mid_points };
+    let skirt = Skirt { walls, footprint };
     // The device's faces first, so that they keep their indices.
-    let mut device_faces = Vec::new();
-    if let Floor::Device(device) = &floor {
-        let level = match side {
-            PartSide::Above => Level::Upper,
-            PartSide::Below => Level::Lower,
-        };
-        // Device vertices map by index; only the mid-wall ones, which the
-        // skirt shares, go through the builder's position index.
-        let mut index = vec![u32::MAX; device.mesh.positions.len()];
-        for (k, t) in device.mesh.triangles.iter().enumerate() {
-            if !t.iter().any(|&v| device.levels[v as usize] == level) {
-                continue;
-            }
-            let [p, q, r] = t.map(|v| {
-                let v = v as usize;
-                if index[v] == u32::MAX {
-                    let at = device.mesh.positions[v];
-                    index[v] = match device.levels[v] {
-                        Level::Mid => b.vertex(at),
-                        _ => b.unshared_vertex(at),
-                    };
-                }
-                index[v]
-            });
-            b.mesh.triangles.push([p, r, q]);
-            device_faces.push(k as u32);
-        }
-    }
-    let carried_out = |w: Wall, p: DVec3| -> DVec3 {
-        match w {
-            Wall::XMin => DVec3::new(footprint.x0, p.y, p.z),
-            Wall::XMax => DVec3::new(footprint.x1, p.y, p.z),
-            Wall::YMin => DVec3::new(p.x, footprint.y0, p.z),
-            Wall::YMax => DVec3::new(p.x, footprint.y1, p.z),
-        }
+    let device_faces = match &floor {
+        Floor::Device(device) => device_floor(&mut b, device, side),
+        Floor::Grid { .. } => Vec::new(),
     };
     // Skirt strips.
     for w in Wall::ALL {
-        let pts = on_wall(w);
+        let pts = skirt.on_wall(w);
         for k in 0..pts.len() - 1 {
             let (p, q) = (pts[k], pts[k + 1]);
-            b.quad(p, q, carried_out(w, q), carried_out(w, p), down);
+            b.quad(p, q, skirt.carried_out(w, q), skirt.carried_out(w, p), down);
         }
     }
-    // Corner flats, at the height of the corner's mid point.
-    let corner = |w: Wall, end: bool| {
-        let m = on_wall(w);
-        if end {
-            m[m.len() - 1]
-        } else {
-            m[0]
-        }
-    };
-    let corners = [
-        (corner(Wall::YMin, false), footprint.x0, footprint.y0),
-        (corner(Wall::YMin, true), footprint.x1, footprint.y0),
-        (corner(Wall::YMax, true), footprint.x1, footprint.y1),
-        (corner(Wall::YMax, false), footprint.x0, footprint.y1),
-    ];
+    let corners = skirt.corners();
     // A fan around a point off the square's centre: the keys stand in the
     // middle of these squares, and a diagonal would run through two of a
     // key's polygon vertices, leaving slivers in the booleans.
@@ -855,49 +807,160 @@ pub fn parting_region(
         cells,
     } = floor
     {
-        // Interior grid (nodes strictly inside the corners) and the ring
-        // zipped between its border and the walls' mid curves.
-        let (c0, c2) = (corners[0].0, corners[2].0);
-        let (nx, ny) = (cells.0.max(2), cells.1.max(2));
-        let gx: Vec<f64> = (1..nx)
-            .map(|i| c0.x + (c2.x - c0.x) * i as f64 / nx as f64)
-            .collect();
-        let gy: Vec<f64> = (1..ny)
-            .map(|j| c0.y + (c2.y - c0.y) * j as f64 / ny as f64)
-            .collect();
-        let node: Vec<Vec<DVec3>> = gy
+        grid_floor(
+            &mut b,
+            &skirt,
+            (corners[0].0, corners[2].0),
+            (interior_mid, cells),
+            down,
+        );
+    }
+    sides_and_cap(&mut b, &skirt, &corners, cap_z, cap_out);
+    Region {
+        mesh: b.mesh,
+        device_faces,
+    }
+}
+
+/// The skirt: each wall's mid curve carried horizontally out to the block.
+struct Skirt<'a> {
+    walls: &'a [WallCurves],
+    footprint: &'a Rect,
+}
+
+impl Skirt<'_> {
+    fn on_wall(&self, w: Wall) -> &[DVec3] {
+        &self
+            .walls
             .iter()
-            .map(|&y| {
-                gx.iter()
-                    .map(|&x| DVec3::new(x, y, interior_mid(DVec2::new(x, y))))
-                    .collect()
-            })
-            .collect();
-        for j in 0..gy.len() - 1 {
-            for i in 0..gx.len() - 1 {
-                b.quad(
-                    node[j][i],
-                    node[j][i + 1],
-                    node[j + 1][i + 1],
-                    node[j + 1][i],
-                    down,
-                );
-            }
-        }
-        let (last_i, last_j) = (gx.len() - 1, gy.len() - 1);
-        let inner = |w: Wall| -> Vec<DVec3> {
-            match w {
-                Wall::YMin => node[0].clone(),
-                Wall::YMax => node[last_j].clone(),
-                Wall::XMin => node.iter().map(|r| r[0]).collect(),
-                Wall::XMax => node.iter().map(|r| r[last_i]).collect(),
-            }
-        };
-        for w in Wall::ALL {
-            zip_strip(&mut b, on_wall(w), &inner(w), |p| w.along(p), down);
+            .find(|c| c.wall == w)
+            .expect("four walls")
+            .mid_points
+    }
+
+    fn carried_out(&self, w: Wall, p: DVec3) -> DVec3 {
+        let footprint = self.footprint;
+        match w {
+            Wall::XMin => DVec3::new(footprint.x0, p.y, p.z),
+            Wall::XMax => DVec3::new(footprint.x1, p.y, p.z),
+            Wall::YMin => DVec3::new(p.x, footprint.y0, p.z),
+            Wall::YMax => DVec3::new(p.x, footprint.y1, p.z),
         }
     }
-    // Sides of the region, from the floor's border up to `top_z`, and the top.
+
+    /// The corner squares, flat at the height of the corner's mid point:
+    /// (that point, the block corner's x and y), counter-clockwise from
+    /// (x min, y min).
+    fn corners(&self) -> [(DVec3, f64, f64); 4] {
+        let footprint = self.footprint;
+        let corner = |w: Wall, end: bool| {
+            let m = self.on_wall(w);
+            if end {
+                m[m.len() - 1]
+            } else {
+                m[0]
+            }
+        };
+        [
+            (corner(Wall::YMin, false), footprint.x0, footprint.y0),
+            (corner(Wall::YMin, true), footprint.x1, footprint.y0),
+            (corner(Wall::YMax, true), footprint.x1, footprint.y1),
+            (corner(Wall::YMax, false), footprint.x0, footprint.y1),
+        ]
+    }
+}
+
+/// The device's faces on `side` of the parting line, reversed; returns the
+/// device triangle each added triangle is.
+fn device_floor(b: &mut SolidBuilder, device: &PosedDevice, side: PartSide) -> Vec<u32> {
+    let mut device_faces = Vec::new();
+    let level = match side {
+        PartSide::Above => Level::Upper,
+        PartSide::Below => Level::Lower,
+    };
+    // Device vertices map by index; only the mid-wall ones, which the
+    // skirt shares, go through the builder's position index.
+    let mut index = vec![u32::MAX; device.mesh.positions.len()];
+    for (k, t) in device.mesh.triangles.iter().enumerate() {
+        if !t.iter().any(|&v| device.levels[v as usize] == level) {
+            continue;
+        }
+        let [p, q, r] = t.map(|v| {
+            let v = v as usize;
+            if index[v] == u32::MAX {
+                let at = device.mesh.positions[v];
+                index[v] = match device.levels[v] {
+                    Level::Mid => b.vertex(at),
+                    _ => b.unshared_vertex(at),
+                };
+            }
+            index[v]
+        });
+        b.mesh.triangles.push([p, r, q]);
+        device_faces.push(k as u32);
+    }
+    device_faces
+}
+
+/// The interior grid (nodes strictly inside the corners `c0` and `c2`)
+/// at the height `interior_mid` gives, and the ring zipped between its
+/// border and the walls' mid curves.
+fn grid_floor(
+    b: &mut SolidBuilder,
+    skirt: &Skirt,
+    (c0, c2): (DVec3, DVec3),
+    (interior_mid, cells): (&dyn Fn(DVec2) -> f64, (usize, usize)),
+    down: DVec3,
+) {
+    let (nx, ny) = (cells.0.max(2), cells.1.max(2));
+    let gx: Vec<f64> = (1..nx)
+        .map(|i| c0.x + (c2.x - c0.x) * i as f64 / nx as f64)
+        .collect();
+    let gy: Vec<f64> = (1..ny)
+        .map(|j| c0.y + (c2.y - c0.y) * j as f64 / ny as f64)
+        .collect();
+    let node: Vec<Vec<DVec3>> = gy
+        .iter()
+        .map(|&y| {
+            gx.iter()
+                .map(|&x| DVec3::new(x, y, interior_mid(DVec2::new(x, y))))
+                .collect()
+        })
+        .collect();
+    for j in 0..gy.len() - 1 {
+        for i in 0..gx.len() - 1 {
+            b.quad(
+                node[j][i],
+                node[j][i + 1],
+                node[j + 1][i + 1],
+                node[j + 1][i],
+                down,
+            );
+        }
+    }
+    let (last_i, last_j) = (gx.len() - 1, gy.len() - 1);
+    let inner = |w: Wall| -> Vec<DVec3> {
+        match w {
+            Wall::YMin => node[0].clone(),
+            Wall::YMax => node[last_j].clone(),
+            Wall::XMin => node.iter().map(|r| r[0]).collect(),
+            Wall::XMax => node.iter().map(|r| r[last_i]).collect(),
+        }
+    };
+    for w in Wall::ALL {
+        zip_strip(b, skirt.on_wall(w), &inner(w), |p| w.along(p), down);
+    }
+}
+
+/// The region's sides, from the floor's border up to `top_z`, and its cap.
+fn sides_and_cap(
+    b: &mut SolidBuilder,
+    skirt: &Skirt,
+    corners: &[(DVec3, f64, f64); 4],
+    top_z: f64,
+    cap_out: DVec3,
+) {
+    let footprint = skirt.footprint;
     let border = |w: Wall| -> Vec<DVec3> {
         // The floor's border on the footprint side beyond wall `w`, in
         // increasing along-coordinate, corners included.
@@ -908,7 +971,7 @@ pub fn parting_region(
             Wall::XMin => (corners[0], corners[3]),
         };
         let mut pts = vec![DVec3::new(c0.1, c0.2, c0.0.z)];
-        pts.extend(on_wall(w).iter().map(|&p| carried_out(w, p)));
+        pts.extend(skirt.on_wall(w).iter().map(|&p| skirt.carried_out(w, p)));
         pts.push(DVec3::new(c1.1, c1.2, c1.0.z));
         pts
     };
@@ -927,7 +990,7 @@ pub fn parting_region(
                 top_ring.push(q);
             }
         }
-        zip_strip(&mut b, &pts, &top, |p| w.along(p), w.outward().extend(0.0));
+        zip_strip(b, &pts, &top, |p| w.along(p), w.outward().extend(0.0));
     }
     if top_ring.first() == top_ring.last() {
         top_ring.pop();
@@ -936,10 +999,6 @@ pub fn parting_region(
     for k in 0..top_ring.len() {
         let (p, q) = (top_ring[k], top_ring[(k + 1) % top_ring.len()]);
         b.triangle(c, p, q, cap_out);
-    }
-    Region {
-        mesh: b.mesh,
-        device_faces,
     }
 }
 
