@@ -302,34 +302,49 @@ struct Counts {
     inner_loops: usize,
 }
 
-/// The faces of one body as shells, one per connected set of faces in the
-/// order of their first triangle (deterministic), and the body's counts.
-fn body_shells(
-    surfaces: &PrintedSurfaces,
-    dm: &DeviceMesh,
-    body: &Body,
-) -> Result<(Vec<Shell>, Counts), BrepError> {
-    let pieces = pieces(body.mesh, body.faces)?;
-    // the (t, v) parameters of a body vertex on a revealer lens or band span
-    let params_on = |v: u32, lens: LensRef| -> Result<DVec2, BrepError> {
-        let (source, _) = body.vertices[v as usize];
-        dm.origins[source as usize]
-            .params_on(lens)
-            .ok_or_else(|| BrepError::Topology(format!("body vertex {v} is not on {lens:?}")))
-    };
-    let lens_of = |face: BodyFace| match face {
+/// Which lens or band surface a body face lies on, and at which layer.
+fn lens_of(face: BodyFace) -> Option<(LensRef, Layer)> {
+    match face {
         BodyFace::Revealer(i) => Some((LensRef::Revealer(i), Layer::Top)),
         BodyFace::Section { k, layer } => Some((LensRef::Base(k), layer)),
         _ => None,
-    };
-    let surface_of = |lens: LensRef, layer: Layer| -> Result<NurbsSurface<Vector4>, BrepError> {
+    }
+}
+
+/// The exact geometry of one body's faces and edges.
+struct BodyGeometry<'a> {
+    surfaces: &'a PrintedSurfaces<'a>,
+    dm: &'a DeviceMesh,
+    body: &'a Body<'a>,
+}
+
+impl BodyGeometry<'_> {
+    fn at(&self, v: u32) -> DVec3 {
+        self.body.mesh.positions[v as usize]
+    }
+
+    /// The (t, v) parameters of a body vertex on a revealer lens or band span.
+    fn params_on(&self, v: u32, lens: LensRef) -> Result<DVec2, BrepError> {
+        let (source, _) = self.body.vertices[v as usize];
+        self.dm.origins[source as usize]
+            .params_on(lens)
+            .ok_or_else(|| BrepError::Topology(format!("body vertex {v} is not on {lens:?}")))
+    }
+
+    fn surface_of(&self, lens: LensRef, layer: Layer) -> Result<NurbsSurface<Vector4>, BrepError> {
         match lens {
-            LensRef::Revealer(i) => Ok(surfaces.revealer.surfaces[&i].clone()),
-            LensRef::Base(k) => surfaces.section(k, layer),
+            LensRef::Revealer(i) => Ok(self.surfaces.revealer.surfaces[&i].clone()),
+            LensRef::Base(k) => self.surfaces.section(k, layer),
         }
-    };
-    let at = |v: u32| body.mesh.positions[v as usize];
-    let curve = |piece: &Piece<BodyFace>, other: &Piece<BodyFace>, run: &Run| {
+    }
+
+    /// The curve of `run`, the edge between `piece` and `other`.
+    fn curve(
+        &self,
+        piece: &Piece<BodyFace>,
+        other: &Piece<BodyFace>,
+        run: &Run,
+    ) -> Result<Curve, BrepError> {
         // the face with a lens or band surface decides the curve
         let (surface_face, other_face) = match (lens_of(piece.patch), lens_of(other.patch)) {
             (Some(_), _) => (piece.patch, other.patch),
@@ -338,25 +353,25 @@ fn body_shells(
                 // walls and band sides meet in vertical lines: the mesh's
                 // (a wall corner's vertices lie on the outline only to the
                 // mesher's wall snap, as in the device's B-rep)
-                let pts: Vec<DVec3> = run.vertices.iter().map(|&v| at(v)).collect();
+                let pts: Vec<DVec3> = run.vertices.iter().map(|&v| self.at(v)).collect();
                 return Ok(Curve::BSplineCurve(polyline(&pts)));
             }
         };
         let (lens, layer) = lens_of(surface_face).expect("chosen for its surface");
         if other_face == BodyFace::Repaired {
             // the band's repaired outline: the mesh's own edges
-            let pts: Vec<DVec3> = run.vertices.iter().map(|&v| at(v)).collect();
+            let pts: Vec<DVec3> = run.vertices.iter().map(|&v| self.at(v)).collect();
             return Ok(Curve::BSplineCurve(polyline(&pts)));
         }
         if let BodyFace::Wall(side) = other_face {
-            let pts: Vec<DVec3> = run.vertices.iter().map(|&v| at(v)).collect();
-            return Ok(trim_curve(surfaces.design, side, &pts));
+            let pts: Vec<DVec3> = run.vertices.iter().map(|&v| self.at(v)).collect();
+            return Ok(trim_curve(self.surfaces.design, side, &pts));
         }
         // a crease of the surface: t = 0 or t = 1 at every vertex
         let params: Vec<DVec2> = run
             .vertices
             .iter()
-            .map(|&v| params_on(v, lens))
+            .map(|&v| self.params_on(v, lens))
             .collect::<Result<_, _>>()?;
         let Some(t) = [0.0, 1.0]
             .into_iter()
@@ -366,36 +381,38 @@ fn body_shells(
                 "{surface_face:?} meets {other_face:?} away from a crease"
             )));
         };
-        let surface = surface_of(lens, layer)?;
+        let surface = self.surface_of(lens, layer)?;
         let (v0, v1) = (params[0].y, params.last().unwrap().y);
         Ok(Curve::BSplineCurve(crease_curve(&surface, t, v0, v1)))
-    };
-    let face = |piece: &Piece<BodyFace>, wires: Vec<Wire>| -> Result<Face, BrepError> {
+    }
+
+    /// The face of `piece`, bounded by `wires`, on its exact surface.
+    fn face(&self, piece: &Piece<BodyFace>, wires: Vec<Wire>) -> Result<Face, BrepError> {
         let refuse = |e: truck_topology::errors::Error| BrepError::Truck {
             what: "face",
             detail: format!("{:?}: {e}", piece.patch),
         };
-        let tri = body.mesh.triangles[piece.triangle as usize];
-        let [p0, p1, p2] = tri.map(at);
+        let tri = self.body.mesh.triangles[piece.triangle as usize];
+        let [p0, p1, p2] = tri.map(|v| self.at(v));
         let outward = (p1 - p0).cross(p2 - p0);
         match piece.patch {
-            BodyFace::Wall(side) => wall_face(surfaces.design, side, wires).map_err(refuse),
+            BodyFace::Wall(side) => wall_face(self.surfaces.design, side, wires).map_err(refuse),
             BodyFace::Revealer(_) | BodyFace::Section { .. } => {
                 let (lens, layer) = lens_of(piece.patch).expect("a lens or band face");
                 let pv = tri
                     .iter()
-                    .map(|&v| params_on(v, lens))
+                    .map(|&v| self.params_on(v, lens))
                     .collect::<Result<Vec<_>, _>>()?;
                 let at = (pv[0] + pv[1] + pv[2]) / 3.0;
-                surface_face(&surface_of(lens, layer)?, outward, at, wires).map_err(refuse)
+                surface_face(&self.surface_of(lens, layer)?, outward, at, wires).map_err(refuse)
             }
             BodyFace::BandSide { crease } => {
                 // parameters: (0 at the top, 1 at the bottom; the station v)
                 let pv = tri
                     .iter()
                     .map(|&v| -> Result<DVec2, BrepError> {
-                        let (_, layer) = body.vertices[v as usize];
-                        let tv = params_on(v, LensRef::Base(crease))?;
+                        let (_, layer) = self.body.vertices[v as usize];
+                        let tv = self.params_on(v, LensRef::Base(crease))?;
                         Ok(DVec2::new(
                             if layer == Layer::Top { 0.0 } else { 1.0 },
                             tv.y,
@@ -403,59 +420,93 @@ fn body_shells(
                     })
                     .collect::<Result<Vec<_>, _>>()?;
                 let at = (pv[0] + pv[1] + pv[2]) / 3.0;
-                surface_face(&surfaces.band_side(crease)?, outward, at, wires).map_err(refuse)
+                surface_face(&self.surfaces.band_side(crease)?, outward, at, wires).map_err(refuse)
             }
-            BodyFace::Repaired => {
-                // the top polyline: the piece's outer loop's vertices at the
-                // top layer, which run consecutively (a strip of vertical quads)
-                let ring: Vec<u32> = piece.loops[0]
-                    .iter()
-                    .flat_map(|run| &run.vertices[1..])
-                    .copied()
-                    .collect();
-                let top = |v: u32| body.vertices[v as usize].1 == Layer::Top;
-                let start = (0..ring.len())
-                    .find(|&i| top(ring[i]) && !top(ring[(i + ring.len() - 1) % ring.len()]))
-                    .ok_or_else(|| {
-                        BrepError::Topology("a repaired band side has no top edge".into())
-                    })?;
-                let upper: Vec<u32> = (0..ring.len())
-                    .map(|i| ring[(start + i) % ring.len()])
-                    .take_while(|&v| top(v))
-                    .collect();
-                let sources: Vec<u32> =
-                    upper.iter().map(|&v| body.vertices[v as usize].0).collect();
-                let pts: Vec<DVec3> = upper.iter().map(|&v| at(v)).collect();
-                let (surface, knots) = ruled_down(&pts, surfaces.printed.band_thickness);
-                // the triangle's parameters: its vertices' places on the polyline
-                let pv = tri
-                    .iter()
-                    .map(|&v| {
-                        let (source, layer) = body.vertices[v as usize];
-                        let i = sources.iter().position(|&s| s == source).ok_or_else(|| {
-                            BrepError::Topology(
-                                "a repaired band side's triangle leaves its strip".into(),
-                            )
-                        })?;
-                        Ok(DVec2::new(
-                            if layer == Layer::Top { 0.0 } else { 1.0 },
-                            knots[i],
-                        ))
-                    })
-                    .collect::<Result<Vec<_>, BrepError>>()?;
-                let at = (pv[0] + pv[1] + pv[2]) / 3.0;
-                surface_face(&surface, outward, at, wires).map_err(refuse)
-            }
+            BodyFace::Repaired => self.repaired_face(piece, tri, outward, wires),
         }
-    };
+    }
+
+    /// A band side along a repaired wall touch: the top polyline (the
+    /// outer loop's vertices at the top layer, which run consecutively: a
+    /// strip of vertical quads) ruled straight down.
+    fn repaired_face(
+        &self,
+        piece: &Piece<BodyFace>,
+        tri: [u32; 3],
+        outward: DVec3,
+        wires: Vec<Wire>,
+    ) -> Result<Face, BrepError> {
+        // the top polyline: the piece's outer loop's vertices at the
+        // top layer, which run consecutively (a strip of vertical quads)
+        let ring: Vec<u32> = piece.loops[0]
+            .iter()
+            .flat_map(|run| &run.vertices[1..])
+            .copied()
+            .collect();
+        let top = |v: u32| self.body.vertices[v as usize].1 == Layer::Top;
+        let start = (0..ring.len())
+            .find(|&i| top(ring[i]) && !top(ring[(i + ring.len() - 1) % ring.len()]))
+            .ok_or_else(|| BrepError::Topology("a repaired band side has no top edge".into()))?;
+        let upper: Vec<u32> = (0..ring.len())
+            .map(|i| ring[(start + i) % ring.len()])
+            .take_while(|&v| top(v))
+            .collect();
+        let sources: Vec<u32> = upper
+            .iter()
+            .map(|&v| self.body.vertices[v as usize].0)
+            .collect();
+        let pts: Vec<DVec3> = upper.iter().map(|&v| self.at(v)).collect();
+        let (surface, knots) = ruled_down(&pts, self.surfaces.printed.band_thickness);
+        // the triangle's parameters: its vertices' places on the polyline
+        let pv = tri
+            .iter()
+            .map(|&v| {
+                let (source, layer) = self.body.vertices[v as usize];
+                let i = sources.iter().position(|&s| s == source).ok_or_else(|| {
+                    BrepError::Topology("a repaired band side's triangle leaves its strip".into())
+                })?;
+                Ok(DVec2::new(
+                    if layer == Layer::Top { 0.0 } else { 1.0 },
+                    knots[i],
+                ))
+            })
+            .collect::<Result<Vec<_>, BrepError>>()?;
+        let at = (pv[0] + pv[1] + pv[2]) / 3.0;
+        surface_face(&surface, outward, at, wires).map_err(|e| BrepError::Truck {
+            what: "face",
+            detail: format!("{:?}: {e}", piece.patch),
+        })
+    }
+}
+
+/// The faces of one body as shells, one per connected set of faces in the
+/// order of their first triangle (deterministic), and the body's counts.
+fn body_shells(
+    surfaces: &PrintedSurfaces,
+    dm: &DeviceMesh,
+    body: &Body,
+) -> Result<(Vec<Shell>, Counts), BrepError> {
+    let pieces = pieces(body.mesh, body.faces)?;
+    let geometry = BodyGeometry { surfaces, dm, body };
     let assembled = assemble(
         &pieces,
         &body.mesh.positions,
         |piece| lens_of(piece.patch).is_none(),
-        curve,
-        face,
+        |piece, other, run| geometry.curve(piece, other, run),
+        |piece, wires| geometry.face(piece, wires),
     )?;
-    // connected pieces, by the runs they share; a root is its set's first piece
+    let counts = Counts {
+        faces: pieces.len(),
+        edges: assembled.edges,
+        vertices: assembled.vertices,
+        inner_loops: pieces.iter().map(|p| p.loops.len() - 1).sum(),
+    };
+    Ok((connected_shells(&pieces, assembled.faces), counts))
+}
+
+/// `faces` (one per piece) grouped into shells by the runs their pieces
+/// share; a shell's root is its set's first piece.
+fn connected_shells(pieces: &[Piece<BodyFace>], faces: Vec<Face>) -> Vec<Shell> {
     let mut root: Vec<usize> = (0..pieces.len()).collect();
     fn find(root: &mut [usize], mut x: usize) -> usize {
         while root[x] != x {
@@ -472,7 +523,7 @@ fn body_shells(
     }
     let mut shells: Vec<Vec<Face>> = Vec::new();
     let mut shell_of = vec![usize::MAX; pieces.len()];
-    for (p, face) in assembled.faces.into_iter().enumerate() {
+    for (p, face) in faces.into_iter().enumerate() {
         let r = find(&mut root, p);
         if shell_of[r] == usize::MAX {
             shell_of[r] = shells.len();
@@ -480,13 +531,5 @@ fn body_shells(
         }
         shells[shell_of[r]].push(face);
     }
-    Ok((
-        shells.into_iter().map(Shell::from).collect(),
-        Counts {
-            faces: pieces.len(),
-            edges: assembled.edges,
-            vertices: assembled.vertices,
-            inner_loops: pieces.iter().map(|p| p.loops.len() - 1).sum(),
-        },
-    ))
+    shells.into_iter().map(Shell::from).collect()
 }
