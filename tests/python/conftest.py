@@ -1,4 +1,5 @@
 """Shared fixtures: the moirecast binary and the shipped specs, built once."""
+import functools
 import importlib
 import json
 import os
@@ -9,7 +10,14 @@ import tomllib
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
-BIN = pathlib.Path(os.environ.get("MOIRECAST_BIN", ROOT / "target" / "release" / "moirecast"))
+# the test command's build (profile `checked`), or a release build
+BIN = pathlib.Path(
+    os.environ.get("MOIRECAST_BIN")
+    or next(
+        (p for p in (ROOT / "target" / d / "moirecast" for d in ("checked", "release")) if p.exists()),
+        ROOT / "target" / "checked" / "moirecast",
+    )
+)
 ALL_SPECS = sorted((ROOT / "molds").glob("*.toml"))
 
 
@@ -49,47 +57,68 @@ def tool(name):
 def build(spec, out):
     """Runs `moirecast device` and returns (stl path, report)."""
     if not BIN.exists():
-        pytest.fail(f"moirecast binary not found at {BIN}; build it with `cargo build --release`")
+        pytest.fail(f"moirecast binary not found at {BIN}; run ./scripts/test-all.sh")
     args = [str(BIN), "device"] + ([str(spec)] if spec else []) + ["-o", str(out), "--quiet"]
     r = subprocess.run(args, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     return out / "device.stl", json.loads((out / "report.json").read_text())
 
 
+def shared_dir(tmp_path_factory):
+    """A folder every test process of this run shares: under pytest-xdist
+    each worker's base temp is <run>/popen-gwN, and the fixtures live in <run>."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    shared = root / "moirecast-fixtures"
+    shared.mkdir(exist_ok=True)
+    return shared
+
+
+def run_once(shared, command, spec):
+    """`moirecast COMMAND SPEC -o DIR` once per test run, whichever worker
+    asks first (the others wait on its lock): (output dir, report)."""
+    import fcntl
+    import shutil
+
+    key = f"{command}-{spec.stem if spec else 'default'}"
+    out, done = shared / key, shared / f"{key}.done"
+    with open(shared / f"{key}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.exists():
+            if not BIN.exists():
+                pytest.fail(f"moirecast binary not found at {BIN}; run ./scripts/test-all.sh")
+            shutil.rmtree(out, ignore_errors=True)
+            args = [str(BIN), command] + ([str(spec)] if spec else []) + ["-o", str(out), "--quiet"]
+            r = subprocess.run(args, capture_output=True, text=True)
+            assert r.returncode == 0, r.stderr
+            done.write_text("")
+    return out, json.loads((out / "report.json").read_text())
+
+
 @pytest.fixture(scope="session")
 def built(tmp_path_factory):
-    """Every shipped spec, plus the embedded default design, built once."""
-    cache = {}
+    """Every shipped spec's device, plus the embedded default design, built
+    once per run: a function from spec (or None) to (stl path, report)."""
+    shared = shared_dir(tmp_path_factory)
 
     def get(spec):
-        key = spec.name if spec else "default"
-        if key not in cache:
-            cache[key] = build(spec, tmp_path_factory.mktemp(key.replace(".toml", "")))
-        return cache[key]
+        out, report = run_once(shared, "device", spec)
+        return out / "device.stl", report
 
     return get
 
 
 def runs_once(tmp_path_factory, command):
-    """`moirecast COMMAND SPEC -o DIR`, each spec run once per session:
+    """`moirecast COMMAND SPEC -o DIR`, each spec run once per test run:
     a function from spec to (output dir, report)."""
-    cache = {}
-
-    def get(spec):
-        if spec.name not in cache:
-            if not BIN.exists():
-                pytest.fail(f"moirecast binary not found at {BIN}; build it with `cargo build --release`")
-            out = tmp_path_factory.mktemp(spec.stem)
-            r = subprocess.run([str(BIN), command, str(spec), "-o", str(out), "--quiet"], capture_output=True, text=True)
-            assert r.returncode == 0, r.stderr
-            cache[spec.name] = (out, json.loads((out / "report.json").read_text()))
-        return cache[spec.name]
-
-    return get
+    shared = shared_dir(tmp_path_factory)
+    return lambda spec: run_once(shared, command, spec)
 
 
+@functools.lru_cache(maxsize=16)
 def manifold(path):
-    """An STL as a manifold3d solid, welded first; its status must be NoError."""
+    """An STL as a manifold3d solid, welded first; its status must be NoError.
+    Loaded once per process (solids are immutable)."""
     import numpy as np
 
     m3d = oracle("manifold3d")
