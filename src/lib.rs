@@ -342,6 +342,8 @@ pub struct MoldOutcome {
     pub warnings: Vec<String>,
     pub volumes: moirecast_mold::Volumes,
     pub triangles: [usize; 3],
+    /// What to weigh out, in one line.
+    pub casting: String,
 }
 
 /// An STL the mold command writes: a half, checked when it was cut, or a
@@ -458,6 +460,7 @@ pub fn run_mold(
         .into_bytes(),
     );
     let report = mold_report::mold_report(spec, &mold, &checks, reports);
+    let casting = report.casting.line();
     let (written, bytes) = commit_with_report(files, &report, out)?;
     progress.tick(1);
     Ok(MoldOutcome {
@@ -472,5 +475,6 @@ pub fn run_mold(
             mold.top.mesh().triangles.len(),
             mold.bottom.mesh().triangles.len(),
         ],
+        casting,
     })
 }

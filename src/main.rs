@@ -384,6 +384,7 @@ fn run(cli: Cli) -> Result<()> {
                     done.triangles[1], done.triangles[2], done.triangles[0],
                     done.checks, done.failed.len()
                 );
+                eprintln!("{}", done.casting);
                 print_written(&done.written, done.bytes, started);
             }
         }

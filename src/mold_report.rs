@@ -30,6 +30,120 @@ pub struct VolumeReport {
     pub sum_relative_error: f64,
 }
 
+/// Extra material to mix beyond what fills the mold: a share of the fill,
+/// and at least a few grams (what stays in the cup and on the stirrer,
+/// which dominates small pours).
+const OVERFILL_SHARE: f64 = 0.3;
+const OVERFILL_MIN_G: f64 = 5.0;
+
+/// What to weigh out for a cast (docs/casting.md).
+#[derive(Serialize)]
+pub struct CastingReport {
+    /// The cavity and the runner, sprue, pour cone and vents: what the
+    /// material fills (mL = cm³).
+    pub fill_ml: f64,
+    pub cavity_ml: f64,
+    pub channels_ml: f64,
+    /// The material (named by `lens.material`, or the one whose index
+    /// `lens.index` is, then `material_from_index`).
+    pub material: Option<&'static str>,
+    pub material_from_index: bool,
+    /// Density, mass of the fill, and the suggested mix with its parts by
+    /// mass; `None` where no source states the material's density and ratio.
+    pub density_g_per_ml: Option<f64>,
+    pub fill_g: Option<f64>,
+    pub overfill: OverfillReport,
+    pub mix_g: Option<f64>,
+    pub parts: Vec<PartReport>,
+    pub source: Option<&'static str>,
+}
+
+#[derive(Serialize)]
+pub struct OverfillReport {
+    pub share: f64,
+    pub at_least_g: f64,
+    pub note: &'static str,
+}
+
+#[derive(Serialize)]
+pub struct PartReport {
+    pub name: &'static str,
+    /// Its share in the ratio by mass (10 for 10 : 1).
+    pub ratio: f64,
+    pub grams: f64,
+}
+
+impl CastingReport {
+    pub fn new(volumes: &moirecast_mold::Volumes, spec: &Spec) -> Self {
+        let (fill_ml, cavity_ml) = (volumes.fill / 1e3, volumes.device / 1e3);
+        let material = spec.cast_material;
+        let data = material.and_then(|(m, _)| m.casting);
+        let fill_g = data.map(|c| fill_ml * c.density_g_per_ml);
+        let mix_g = fill_g.map(|g| (g * (1.0 + OVERFILL_SHARE)).max(g + OVERFILL_MIN_G));
+        let parts = match (data, mix_g) {
+            (Some(c), Some(mix)) => {
+                let total: f64 = c.parts.iter().map(|p| p.0).sum();
+                c.parts
+                    .iter()
+                    .map(|&(ratio, name)| PartReport {
+                        name,
+                        ratio,
+                        grams: mix * ratio / total,
+                    })
+                    .collect()
+            }
+            _ => Vec::new(),
+        };
+        CastingReport {
+            fill_ml,
+            cavity_ml,
+            channels_ml: fill_ml - cavity_ml,
+            material: material.map(|(m, _)| m.name),
+            material_from_index: material.is_some_and(|(_, from_index)| from_index),
+            density_g_per_ml: data.map(|c| c.density_g_per_ml),
+            fill_g,
+            overfill: OverfillReport {
+                share: OVERFILL_SHARE,
+                at_least_g: OVERFILL_MIN_G,
+                note: "mix the fill plus this share, and at least this many grams more: what stays in the cup and on the stirrer",
+            },
+            mix_g,
+            parts,
+            source: data.map(|c| c.source),
+        }
+    }
+
+    /// The one line `moirecast mold` prints.
+    pub fn line(&self) -> String {
+        let fill = format!(
+            "casting: fill {:.2} mL (cavity {:.2} + channels {:.2})",
+            self.fill_ml, self.cavity_ml, self.channels_ml
+        );
+        match (self.material, self.fill_g, self.mix_g) {
+            (Some(m), Some(g), Some(mix)) => {
+                let parts: Vec<String> = self
+                    .parts
+                    .iter()
+                    .map(|p| format!("{:.2} g {}", p.grams, p.name))
+                    .collect();
+                let ratio: Vec<String> =
+                    self.parts.iter().map(|p| format!("{}", p.ratio)).collect();
+                format!(
+                    "{fill} = {g:.2} g of {m}; mix {mix:.1} g: {} ({} by mass)",
+                    parts.join(" + "),
+                    ratio.join(" : ")
+                )
+            }
+            (m, ..) => format!(
+                "{fill}; {}: weigh out fill × density from its datasheet",
+                m.map_or("no material named".to_string(), |m| format!(
+                    "no density or ratio is known for {m}"
+                ))
+            ),
+        }
+    }
+}
+
 #[derive(Serialize)]
 pub struct DraftReport {
     pub degrees: f64,
@@ -78,6 +192,7 @@ pub struct MoldReport {
     pub block_max: [f64; 3],
     pub files: BTreeMap<String, FileReport>,
     pub volumes: VolumeReport,
+    pub casting: CastingReport,
     /// Through-holes of each half (its genus): the channels through it.
     pub channels_through_top: u32,
     pub channels_through_bottom: u32,
@@ -128,6 +243,7 @@ pub fn mold_report(
             channels_mm3: v.voids,
             sum_relative_error: (v.top + v.bottom + v.device + v.voids - v.block) / v.block,
         },
+        casting: CastingReport::new(v, spec),
         channels_through_top: mold.genus_top,
         channels_through_bottom: mold.genus_bottom,
         draft_top: DraftReport {

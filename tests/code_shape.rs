@@ -21,7 +21,10 @@ fn code_only(src: &str) -> Vec<u8> {
             let end = rest.iter().position(|&c| c == b'\n').unwrap_or(rest.len());
             i += end;
         } else if rest.starts_with(b"/*") {
-            let end = rest.windows(2).position(|w| w == b"*/").map_or(rest.len(), |e| e + 2);
+            let end = rest
+                .windows(2)
+                .position(|w| w == b"*/")
+                .map_or(rest.len(), |e| e + 2);
             keep_newlines(&rest[..end], &mut out);
             i += end;
         } else if (rest.starts_with(b"r\"") || rest.starts_with(b"r#"))
@@ -46,7 +49,10 @@ fn code_only(src: &str) -> Vec<u8> {
             i += j + 1;
         } else if rest[0] == b'\'' && rest.len() > 2 && (rest[2] == b'\'' || rest[1] == b'\\') {
             // a character literal ('x', '\n', '\u{..}'), not a lifetime
-            let end = rest[1..].iter().position(|&c| c == b'\'').map_or(1, |e| e + 2);
+            let end = rest[1..]
+                .iter()
+                .position(|&c| c == b'\'')
+                .map_or(1, |e| e + 2);
             i += end;
         } else {
             out.push(rest[0]);

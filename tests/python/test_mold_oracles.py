@@ -66,6 +66,30 @@ def test_parts_do_not_overlap_and_fill_the_block(spec, molds):
 
 
 @pytest.mark.parametrize("spec", MOLD_SPECS, ids=IDS)
+def test_casting_fills_the_cavity_and_its_channels(spec, molds):
+    """The casting volume is the device plus the channels' part in the block
+    outside it (measured here from the written construction solid), and the
+    grams follow from Sylgard 184's density and 10 : 1 ratio."""
+    m3d = oracle("manifold3d")
+    out, report = molds(spec)
+    assert report["bolts"] == [], "bolt holes are in the channels solid but are not filled"
+    lo, hi = np.array(report["block_min"]), np.array(report["block_max"])
+    box = m3d.Manifold.cube(hi - lo).translate(lo)
+    device = manifold(out / "device.stl")
+    channels = (manifold(out / "construction-channels.stl") ^ box) - device
+    casting = report["casting"]
+    assert casting["fill_ml"] * 1e3 == pytest.approx(device.volume() + channels.volume(), rel=1e-6)
+    assert casting["cavity_ml"] * 1e3 == pytest.approx(device.volume(), rel=1e-6)
+    assert casting["material"] == "sylgard-184"
+    assert casting["fill_g"] == pytest.approx(casting["fill_ml"] * 1.03, rel=1e-12)
+    base, agent = casting["parts"]
+    assert (base["name"], agent["name"]) == ("base", "curing agent")
+    assert base["grams"] == pytest.approx(10 * agent["grams"], rel=1e-12)
+    assert base["grams"] + agent["grams"] == pytest.approx(casting["mix_g"], rel=1e-12)
+    assert casting["mix_g"] >= casting["fill_g"] + 5
+
+
+@pytest.mark.parametrize("spec", MOLD_SPECS, ids=IDS)
 def test_halves_release_along_z(spec, molds):
     out, report = molds(spec)
     top, bottom, device = (manifold(out / n) for n in PARTS)

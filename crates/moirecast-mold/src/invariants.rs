@@ -42,6 +42,9 @@ pub struct Volumes {
     pub device: f64,
     /// Channels, bolt holes and key clearances inside the block.
     pub voids: f64,
+    /// What the cast material fills: the cavity (the device) and the
+    /// runner, sprue, pour cone and vents inside the block.
+    pub fill: f64,
 }
 
 /// Distance from `q` to the triangle `corners`.
@@ -126,7 +129,7 @@ pub(crate) fn solid_checks(cut: &Cut) -> Vec<CheckResult> {
 pub(crate) fn volumes(
     cut: &Cut,
     posed: &PosedDevice,
-    f: &Features,
+    (f, block): (&Features, &Manifold),
     (above, bumps, sockets): (&Manifold, &Manifold, &Manifold),
 ) -> Result<(Volumes, CheckResult)> {
     let (v_top, v_bottom) = (
@@ -149,12 +152,19 @@ pub(crate) fn volumes(
         "relative",
         format!("top {v_top:.6} + bottom {v_bottom:.6} + device {v_device:.6} + voids {v_voids:.6} = {sum:.6} mm³; block {v_block:.6} mm³"),
     );
+    // the channels the material fills (not the bolt holes), less their
+    // part inside the cavity, which the device's volume counts
+    let fill_in_block = checked(
+        "runner, sprue and vents in the block",
+        cut.channels.fill.intersection(block),
+    )?;
     let volumes = Volumes {
         block: v_block,
         top: v_top,
         bottom: v_bottom,
         device: v_device,
         voids: v_voids,
+        fill: v_device + fill_in_block.volume() - cut.channels_in_device.volume(),
     };
     Ok((volumes, check))
 }

@@ -129,7 +129,7 @@ pub fn build_mold_with(
     let mut checks = invariants::solid_checks(&cut);
     progress.tick(1);
     progress.stage("mold volumes", 1);
-    let (volumes, sum) = invariants::volumes(&cut, &posed, &f, key_solids)?;
+    let (volumes, sum) = invariants::volumes(&cut, &posed, (&f, &block), key_solids)?;
     checks.push(sum);
     progress.tick(1);
     progress.stage("mold overlaps", 1);

@@ -209,7 +209,7 @@ mod tests {
             };
             let (table, key) = k.key.split_once('.').unwrap();
             if k.key == "lens.material" {
-                let names: Vec<&str> = crate::MATERIALS.iter().map(|m| m.0).collect();
+                let names: Vec<&str> = crate::MATERIALS.iter().map(|m| m.name).collect();
                 assert_eq!(choices, &names[..]);
                 continue;
             }

@@ -192,18 +192,81 @@ enum RuleKey {
     EqualRadius,
 }
 
-/// Named materials and their refractive index.
-pub const MATERIALS: &[(&str, f64, &str)] = &[
-    ("sylgard-184", 1.41, "Dow datasheet 1.4118 at 632.8 nm"),
-    (
-        "polyjet-clear",
-        1.5,
-        "the paper's assumption for PolyJet clear",
-    ),
-    ("pmma", 1.49, "acrylic"),
-    ("polycarbonate", 1.585, ""),
-    ("epoxy", 1.55, "typical clear casting epoxy"),
+/// A named material: its refractive index and, for the two-part resins a
+/// mold is cast in, what a person weighs out.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Material {
+    pub name: &'static str,
+    pub index: f64,
+    pub index_source: &'static str,
+    /// Casting data, where a source states them.
+    pub casting: Option<CastingData>,
+}
+
+/// How a cast material is mixed.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct CastingData {
+    /// Density of the mixed material (g/cm³, which is g/mL).
+    pub density_g_per_ml: f64,
+    /// Parts by mass, and their names: (10, "base"), (1, "curing agent").
+    pub parts: [(f64, &'static str); 2],
+    /// Where the density and the ratio come from.
+    pub source: &'static str,
+}
+
+/// Named materials: `lens.material`.
+pub const MATERIALS: &[Material] = &[
+    Material {
+        name: "sylgard-184",
+        index: 1.41,
+        index_source: "Dow datasheet 1.4118 at 632.8 nm",
+        casting: Some(CastingData {
+            density_g_per_ml: 1.03,
+            parts: [(10.0, "base"), (1.0, "curing agent")],
+            source: "Dow, SYLGARD 184 Silicone Elastomer technical data sheet: specific gravity (cured) 1.03; mix ratio 10 : 1 base to curing agent by weight",
+        }),
+    },
+    Material {
+        name: "polyjet-clear",
+        index: 1.5,
+        index_source: "the paper's assumption for PolyJet clear",
+        casting: None,
+    },
+    Material {
+        name: "pmma",
+        index: 1.49,
+        index_source: "acrylic",
+        casting: None,
+    },
+    Material {
+        name: "polycarbonate",
+        index: 1.585,
+        index_source: "",
+        casting: None,
+    },
+    Material {
+        name: "epoxy",
+        index: 1.55,
+        index_source: "typical clear casting epoxy",
+        casting: None,
+    },
 ];
+
+/// The material a spec casts, and whether it was taken from the index
+/// rather than named: the one `lens.material` names, or else the one
+/// whose index `index` is (1.41, the default, is Sylgard 184's).
+fn cast_material(lens: &LensTable, index: f64) -> Option<(&'static Material, bool)> {
+    match &lens.material {
+        Some(m) => MATERIALS
+            .iter()
+            .find(|mat| &mat.name == m)
+            .map(|m| (m, false)),
+        None => MATERIALS
+            .iter()
+            .find(|m| m.index == index)
+            .map(|m| (m, true)),
+    }
+}
 
 #[derive(Deserialize, Serialize, Debug)]
 #[serde(deny_unknown_fields, default)]
@@ -422,6 +485,10 @@ pub struct Spec {
     /// The profile's source, for reports: "rings", "profiles/horse.png (shape)".
     pub profile_source: String,
     pub material: Option<String>,
+    /// The material the device is cast in (see `docs/casting.md`): the one
+    /// `lens.material` names, or the one whose index `lens.index` is, then
+    /// marked as taken from the index.
+    pub cast_material: Option<(&'static Material, bool)>,
     /// The `[mold]` table, range-checked; fits to the device are checked
     /// when the mold is built.
     pub mold: MoldParams,
@@ -551,6 +618,7 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         origin: file.to_owned(),
         profile_source,
         material: raw.lens.material.clone(),
+        cast_material: cast_material(&raw.lens, index),
     })
 }
 
@@ -603,10 +671,10 @@ fn lens_index(file: &str, lens: &LensTable) -> Result<f64, SpecError> {
         (Some(i), _) => finite(file, "lens.index", *i)?,
         (None, Some(m)) => MATERIALS
             .iter()
-            .find(|(n, ..)| n == m)
-            .map(|(_, i, _)| *i)
+            .find(|mat| mat.name == m)
+            .map(|mat| mat.index)
             .ok_or_else(|| {
-                let names: Vec<&str> = MATERIALS.iter().map(|(n, ..)| *n).collect();
+                let names: Vec<&str> = MATERIALS.iter().map(|m| m.name).collect();
                 invalid(
                     file,
                     "lens.material",
