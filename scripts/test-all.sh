@@ -29,6 +29,7 @@ setup_oracles() {
     # The Python oracles (.venv: manifold3d, trimesh, OpenCascade, lib3mf)
     [ -x .venv/bin/python ] || python3 -m venv .venv
     .venv/bin/python -m pip install -q --disable-pip-version-check -r tests/python/requirements.txt
+    echo "oracles installed at $SECONDS s"
 }
 
 step "installing the oracles in the background (log: $setup_log)"
