@@ -1,6 +1,21 @@
 //! The `moirecast` pipelines behind the command line: spec → exact model →
 //! mesh → checks → files. The binary (`main.rs`) only parses arguments and
 //! draws progress.
+//!
+//! ```
+//! use moirecast_kernel::progress::Silent;
+//!
+//! let spec = moirecast_spec::parse(
+//!     "[surface]\nkind = \"plane\"\n[layout]\nwidth = 3\nheight = 3\n[profile]\nkind = \"flat\"\n[mesh]\ntolerance = 0.01",
+//!     "small.toml",
+//!     moirecast_spec::ImageSource::Embedded,
+//! )
+//! .unwrap();
+//! let out = std::env::temp_dir().join("moirecast-doc-device");
+//! let done = moirecast::run_device(&spec, &out, Default::default(), Default::default(), &Silent).unwrap();
+//! assert!(out.join("device.stl").exists() && out.join("device.step").exists());
+//! assert!(done.checks > 10);
+//! ```
 
 pub mod explore;
 pub mod mold_report;

@@ -5,6 +5,18 @@
 //! The B-rep is built from the same exact model as the mesh, with the
 //! topology of the mesher's face partition ([`topology`]); see [`solid`]
 //! for what each face and edge is and what is guaranteed.
+//!
+//! ```
+//! use moirecast_kernel::{mesher::mesh_device, progress::Silent, Design, DesignParams, PitchSurface};
+//!
+//! let mut params = DesignParams::with_defaults(PitchSurface::Saddle { radius: 60.0 }, 2.0, 2.0, 0.5);
+//! params.tolerance = 0.01;
+//! let design = Design::new(params).unwrap();
+//! let device = mesh_device(&design, &Silent).unwrap();
+//! let step = moirecast_brep::device_step(&design, &device, "device.step").unwrap();
+//! assert_eq!(step.brep.stats.faces, 4 + 4 + 4); // revealer and base lenses, walls
+//! assert!(step.step.len() > 0);
+//! ```
 
 pub mod crosscheck;
 pub mod error;

@@ -4,6 +4,24 @@
 //! check has passed; then each file goes to a temporary name in the target
 //! directory and is renamed into place, so a failed run leaves no partial
 //! file behind and readers never see half a file.
+//!
+//! ```
+//! use moirecast_kernel::{check::SolidMesh, mesher::mesh_device, progress::Silent, Design, DesignParams, PitchSurface};
+//! use moirecast_export::{stl_bytes, OutputSet};
+//!
+//! let mut params = DesignParams::with_defaults(PitchSurface::Plane, 2.0, 2.0, 0.5);
+//! params.tolerance = 0.01;
+//! let device = mesh_device(&Design::new(params).unwrap(), &Silent).unwrap();
+//! // only a mesh that passed its solid checks can be encoded
+//! let (_checks, solid) = SolidMesh::validate(&device.mesh);
+//! let stl = stl_bytes("device.stl", solid.expect("a solid")).unwrap();
+//! assert_eq!(stl.len(), 84 + 50 * device.mesh.triangles.len());
+//! let mut files = OutputSet::new();
+//! files.add("device.stl", stl);
+//! let dir = std::env::temp_dir().join("moirecast-export-doc");
+//! let written = files.commit(&dir).unwrap();
+//! assert_eq!(written, vec![dir.join("device.stl")]);
+//! ```
 
 mod threemf;
 

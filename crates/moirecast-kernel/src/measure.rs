@@ -137,9 +137,17 @@ fn lens_of(design: &Design, o: &VertexOrigin) -> LensRef {
     }
 }
 
+/// How far outside its lens's parameter range [0, 1] a re-projected
+/// vertex may land (round-off at the creases).
+const ON_LENS_SLACK: f64 = 1e-6;
+
 /// Vertical distance (mm) from every `stride`-th vertex to its exact lens
 /// surface, found afresh: solve the lens parameters (t, v) whose point has
-/// the vertex's x and y, from a generic start, and compare z.
+/// the vertex's x and y, and compare z. The solve starts at the lens's
+/// middle (t = ½) at the station whose middle point has the vertex's y, so
+/// that on a steep lens it finds the point of the lens itself, not one of
+/// the arc's circle continued past a crease; a solution off the lens
+/// (t outside [0, 1]) is a failure.
 pub fn vertex_on_surface(design: &Design, dm: &DeviceMesh, stride: usize) -> CheckResult {
     let worst = (0..dm.mesh.positions.len())
         .into_par_iter()
@@ -147,18 +155,25 @@ pub fn vertex_on_surface(design: &Design, dm: &DeviceMesh, stride: usize) -> Che
         .map(|vi| {
             let p = dm.mesh.positions[vi];
             let lens = lens_of(design, &dm.origins[vi]);
-            let solved = newton_2d(DVec2::new(0.5, p.y), &|| String::new(), |q| {
+            let station = crate::solve::newton_1d(p.y, &String::new, |v| {
+                design
+                    .lens_point(lens, 0.5, v)
+                    .map(|s| s.y - p.y)
+                    .unwrap_or(f64::NAN)
+            })
+            .unwrap_or(p.y);
+            let solved = newton_2d(DVec2::new(0.5, station), &|| String::new(), |q| {
                 design
                     .lens_point(lens, q.x, q.y)
                     .map(|s| DVec2::new(s.x - p.x, s.y - p.y))
                     .unwrap_or(DVec2::NAN)
             });
             let dist = match solved {
-                Ok(q) => design
+                Ok(q) if (-ON_LENS_SLACK..=1.0 + ON_LENS_SLACK).contains(&q.x) => design
                     .lens_point(lens, q.x, q.y)
                     .map(|s| (s.z - p.z).abs())
                     .unwrap_or(f64::INFINITY),
-                Err(_) => f64::INFINITY,
+                _ => f64::INFINITY,
             };
             (dist, vi)
         })

@@ -74,7 +74,7 @@ impl Frame {
         )
     }
 
-    /// The frame's [`crate::fidelity`].
+    /// The frame's [`crate::fidelity()`].
     pub fn fidelity(&self) -> f64 {
         crate::fidelity(
             &self.signal,
@@ -292,7 +292,7 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
     }
 }
 
-/// [`render`] and the frame's [`crate::fidelity`].
+/// [`render`] and the frame's [`crate::fidelity()`].
 pub fn render_scored(design: &Design, scene: &Scene, view: View) -> (Frame, f64) {
     let frame = render(design, scene, view);
     let fidelity = frame.fidelity();

@@ -4,6 +4,22 @@
 //! unknown key, a value out of range or a missing image is a [`SpecError`]
 //! that names the key, the value, what is allowed and the fix. Nothing past
 //! this crate sees TOML.
+//!
+//! ```
+//! use moirecast_spec::{parse, ImageSource};
+//!
+//! let spec = parse(
+//!     "[surface]\nkind = \"plane\"\n[layout]\nwidth = 10\nheight = 5\n[profile]\nkind = \"ramp\"",
+//!     "example.toml",
+//!     ImageSource::Embedded,
+//! )
+//! .expect("a valid spec");
+//! assert_eq!(spec.design.lenses, 20); // 10 mm of 0.5 mm lenses
+//!
+//! // a bad value names its key, the value, the range and the fix
+//! let e = parse("[lens]\nafov = 200", "bad.toml", ImageSource::Embedded).unwrap_err();
+//! assert!(e.to_string().contains("`lens.afov` = 200"), "{e}");
+//! ```
 
 use moirecast_kernel::{
     profile::SampledProfile, BaseParams, Design, DesignError, DesignParams, LensParams, LensRule,
@@ -480,7 +496,7 @@ pub enum ImageSource<'a> {
 #[derive(Debug)]
 pub struct Spec {
     pub design: Design,
-    /// Where the spec came from (a path, or "<default>").
+    /// Where the spec came from (a path, or `<default: …>`).
     pub origin: String,
     /// The profile's source, for reports: "rings", "profiles/horse.png (shape)".
     pub profile_source: String,
