@@ -17,6 +17,7 @@
 //! assert!(done.checks > 10);
 //! ```
 
+pub mod errors;
 pub mod explore;
 pub mod mold_report;
 pub mod printed;
@@ -31,6 +32,8 @@ use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{measure, Design};
 use moirecast_spec::Spec;
 use std::path::{Path, PathBuf};
+
+pub use errors::RunError;
 
 /// Vertices re-projected onto their exact surfaces for the report
 /// (tests check every vertex; this keeps the command fast).
@@ -106,6 +109,12 @@ pub fn build_device_checked(
         lens_stats,
         checks,
     })
+}
+
+/// Meshes `spec`'s device; a design rule the mesher finds broken (the
+/// mesh budget) is the spec's error, anything else a bug.
+pub fn mesh_spec(spec: &Spec, progress: &dyn Progress) -> Result<DeviceMesh, RunError> {
+    mesh_device(&spec.design, progress).map_err(|e| RunError::kernel(spec, "meshing the device", e))
 }
 
 /// Measures the device mesh `mesh` against the exact model of `design`
@@ -200,11 +209,11 @@ pub fn run_device(
         if mesher == Mesher::Brep {
             bail!("--mesher brep writes the truck-meshalgo tessellation of a dual-lens device's B-rep as its STL; a printed device's two bodies come from the direct mesher only (their B-rep is written as STEP); leave it out for a printed device");
         }
-        let mesh = mesh_device(&spec.design, progress).context("meshing the device")?;
+        let mesh = mesh_spec(spec, progress)?;
         return printed::write_printed_device(spec, mesh, thoroughness, out, progress);
     }
     let design = &spec.design;
-    let mesh = mesh_device(design, progress).context("meshing the device")?;
+    let mesh = mesh_spec(spec, progress)?;
     progress.stage("checking, B-rep and STEP", 1);
     // the B-rep is built from the mesh only once it is solid; the
     // measurements, which only read it, and the STL run beside it
@@ -226,7 +235,10 @@ pub fn run_device(
     // then the B-rep's
     checks.extend(measured.iter().cloned());
     refuse_failed(&checks)?;
-    let step = step.context("building the B-rep")?;
+    let step = step.map_err(|e| RunError::Internal {
+        stage: "building the B-rep",
+        detail: e.to_string(),
+    })?;
     refuse_failed(&step.checks)?;
     checks.extend(step.checks.iter().cloned());
     let build = DeviceBuild {
@@ -317,19 +329,10 @@ fn lens_area(dm: &DeviceMesh) -> f64 {
         .sum()
 }
 
-/// An error naming the first failed check and its evidence, if one failed.
-pub(crate) fn refuse_failed(checks: &[CheckResult]) -> Result<()> {
-    if let Some(c) = checks.iter().find(|c| !c.passed) {
-        bail!(
-            "check `{}` failed: measured {} {} against limit {} ({}); nothing was written",
-            c.name,
-            c.value,
-            c.unit,
-            c.limit,
-            c.detail
-        );
-    }
-    Ok(())
+/// An error naming the first failed check and its evidence, if one failed:
+/// on an accepted spec, a bug.
+pub(crate) fn refuse_failed(checks: &[CheckResult]) -> Result<(), RunError> {
+    RunError::first_failed(checks, "")
 }
 
 /// Adds `report.json` to `files` and writes them all (or none) into `out`;
@@ -384,14 +387,19 @@ pub fn run_mold(
 ) -> Result<MoldOutcome> {
     if let moirecast_kernel::BaseKind::Printed(_) = spec.design.params.base.kind {
         // refused before any meshing: the mold crate would refuse it too
-        bail!(moirecast_spec::describe_mold_error(
-            &spec.origin,
-            &moirecast_mold::MoldError::NotCastable
-        ));
+        return Err(RunError::mold(spec, moirecast_mold::MoldError::NotCastable).into());
     }
-    let build = build_device(&spec.design, progress)?;
+    let mesh = mesh_spec(spec, progress)?;
+    progress.stage("checking", 1);
+    let (lens_stats, measured) = measure_device(&spec.design, &mesh, Thoroughness::Sampled);
+    progress.tick(1);
+    let build = DeviceBuild {
+        mesh,
+        lens_stats,
+        checks: measured,
+    };
     let mold = moirecast_mold::build_mold(&spec.design, &build.mesh, &spec.mold, progress)
-        .map_err(|e| anyhow::anyhow!(moirecast_spec::describe_mold_error(&spec.origin, &e)))?;
+        .map_err(|e| RunError::mold(spec, e))?;
     progress.stage("writing", 1);
     let mut checks: Vec<CheckResult> = build.checks.clone();
     checks.extend(mold.checks.iter().cloned());
@@ -423,14 +431,8 @@ pub fn run_mold(
                         }
                     };
                     let Some(solid) = solid else {
-                        let c = checks.iter().find(|c| !c.passed).expect("a failed check");
-                        bail!(
-                            "`{name}` failed check `{}` ({} vs {}: {}); nothing was written",
-                            c.name,
-                            c.value,
-                            c.limit,
-                            c.detail
-                        );
+                        RunError::first_failed(checks, "")?;
+                        unreachable!("{name} is a solid when its checks pass");
                     };
                     let bytes = stl_bytes(name, solid)?;
                     let file = report::FileReport::of(solid.mesh(), bytes.len());
@@ -439,17 +441,17 @@ pub fn run_mold(
                 .collect::<Vec<_>>()
         },
     );
+    let device_check_count = device_checks.len();
     checks.splice(0..0, device_checks);
-    if let Some(c) = checks.iter().find(|c| !c.passed) {
-        if !force {
-            bail!(
-                "check `{}` failed: measured {} {} against limit {} ({}); nothing was written (--force writes the files and marks the failure in report.json)",
-                c.name, c.value, c.unit, c.limit, c.detail
-            );
-        }
+    if !force {
+        RunError::first_failed(
+            &checks,
+            " (--force writes the files and marks the failure in report.json)",
+        )?;
     }
     let Some(device) = device else {
-        bail!("the device is not a valid solid (see the failed checks); nothing was written");
+        RunError::first_failed(&checks[..device_check_count], "")?;
+        unreachable!("the device is a solid when its checks pass");
     };
     let mut files = OutputSet::new();
     let mut reports = std::collections::BTreeMap::new();

@@ -171,6 +171,10 @@ struct RunArgs {
     /// Print how long each stage took.
     #[arg(short, long)]
     verbose: bool,
+    /// Build designs over the mesh budget (20 M triangles, about 8 GB):
+    /// without it they are refused with the estimate before any meshing.
+    #[arg(long)]
+    allow_large: bool,
 }
 
 fn bars(quiet: bool, verbose: bool) -> Bars {
@@ -199,7 +203,11 @@ fn start(run: &RunArgs) -> Result<(Bars, std::time::Instant, moirecast_spec::Spe
     let bars = bars(run.quiet, run.verbose);
     let started = std::time::Instant::now();
     bars.stage("reading spec", 1);
-    Ok((bars, started, load_spec(&run.spec)?))
+    let mut spec = load_spec(&run.spec)?;
+    if run.allow_large {
+        spec.design.mesh_budget = moirecast_kernel::MeshBudget::UNLIMITED;
+    }
+    Ok((bars, started, spec))
 }
 
 fn load_spec(spec: &Option<PathBuf>) -> Result<moirecast_spec::Spec> {
@@ -282,6 +290,7 @@ fn run(cli: Cli) -> Result<()> {
             out: PathBuf::from("moirecast-out"),
             quiet: false,
             verbose: false,
+            allow_large: false,
         },
         full_checks: false,
         mesher: MesherArg::Direct,

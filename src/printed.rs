@@ -4,8 +4,8 @@
 
 use crate::report::{self, DutyReport, FileReport, PrintedBrepReport, PrintedReport};
 use crate::{
-    commit_with_report, measure_device, refuse_failed, DeviceBuild, DeviceOutcome, StepFile,
-    Thoroughness,
+    commit_with_report, measure_device, refuse_failed, DeviceBuild, DeviceOutcome, RunError,
+    StepFile, Thoroughness,
 };
 use anyhow::{Context, Result};
 use moirecast_export::{stl_bytes, threemf_file, Material, Object, OutputSet, ThreemfFile};
@@ -181,11 +181,15 @@ struct Encoded {
 /// along lines; their solid checks and, if passed, their STLs and 3MF. The
 /// B-rep's lens and band surfaces are fitted while the bodies are built;
 /// the volumes are those the solid checks measured.
-fn printed_files(design: &Design, mesh: &DeviceMesh) -> Result<PrintedFiles> {
+fn printed_files(spec: &Spec, mesh: &DeviceMesh) -> Result<PrintedFiles> {
+    let design = &spec.design;
     // the bodies first on this thread: everything after waits for them,
     // while the B-rep's surfaces are needed only for their B-rep
     let (bodies, surfaces) = rayon::join(
-        || printed_bodies(design, mesh).context("building the printed bodies"),
+        || {
+            printed_bodies(design, mesh)
+                .map_err(|e| RunError::kernel(spec, "building the printed bodies", e))
+        },
         || moirecast_brep::PrintedSurfaces::fit(design, mesh),
     );
     let bodies = bodies?;
@@ -285,7 +289,7 @@ pub(crate) fn write_printed_device(
     // the bodies' build on this thread: it is the longer, and its serial
     // stretches leave room for the measurements
     let (printed, (lens_stats, measured)) = rayon::join(
-        || printed_files(design, &mesh),
+        || printed_files(spec, &mesh),
         || measure_device(design, &mesh, thoroughness),
     );
     // reported in the order they ran before: the device's, then the bodies'

@@ -8,7 +8,6 @@ use glam::DVec3;
 use image::ImageEncoder;
 use moirecast_export::OutputSet;
 use moirecast_kernel::check::SolidMesh;
-use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{BaseKind, Design};
 use moirecast_render::frame::{render_scored, traced_mesh, Camera, Lighting, View};
@@ -220,7 +219,7 @@ pub fn run_render(
 ) -> Result<RenderOutcome> {
     let design = &spec.design;
     let lighting = options.lights.lighting(design)?;
-    let dm = mesh_device(design, progress).context("meshing the device")?;
+    let dm = crate::mesh_spec(spec, progress)?;
     let (checks, _) = SolidMesh::validate(&dm.mesh);
     refuse_failed(&checks)?;
     progress.stage("rendering", options.tilts_deg.len() as u64);

@@ -147,6 +147,9 @@ pub mod limits {
     pub const INDEX: (f64, f64) = (1.0, 3.0);
     pub const PERIOD_MM: (f64, f64) = (0.05, 20.0);
     pub const MAX_LENSES: f64 = 20000.0;
+    /// Largest layout width or height (mm): a metre is beyond any printer
+    /// or mold; larger lengths are typing mistakes.
+    pub const MAX_LAYOUT_MM: f64 = 1000.0;
     /// Largest surface slope plus half the AFOV (degrees): beyond this a lens
     /// flank turns past vertical-ish and the device is no longer a graph over xy.
     pub const MAX_FLANK_DEG: f64 = 80.0;
@@ -164,6 +167,35 @@ pub mod limits {
     pub const BAND_THICKNESS_MM: (f64, f64) = (0.01, 10.0);
     /// Clear backing thickness (mm).
     pub const BACKING_MM: (f64, f64) = (0.01, 50.0);
+}
+
+/// The largest mesh the mesher makes for a design. Not a validity rule: a
+/// design over it is sound but would take more time and memory than a
+/// user expects (`moirecast --allow-large` lifts it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeshBudget {
+    /// Most device triangles, estimated from the curvature survey before
+    /// any vertex is made; `None`: no limit.
+    pub max_triangles: Option<u64>,
+}
+
+impl MeshBudget {
+    /// 20 M triangles: about 8 GB at the peak of a mold run.
+    pub const DEFAULT: MeshBudget = MeshBudget {
+        max_triangles: Some(20_000_000),
+    };
+    pub const UNLIMITED: MeshBudget = MeshBudget {
+        max_triangles: None,
+    };
+    /// Bytes a run holds at its peak per device triangle: 205 MB for the
+    /// reference mold's 493 k triangles (the device alone: about 200).
+    pub const BYTES_PER_TRIANGLE: f64 = 420.0;
+}
+
+impl Default for MeshBudget {
+    fn default() -> Self {
+        MeshBudget::DEFAULT
+    }
 }
 
 /// A design that satisfies every rule of METHOD. Geometry lives in `model.rs`.
@@ -189,6 +221,8 @@ pub struct Design {
     pub max_curvature: f64,
     /// Largest slope of f on the layout (rad).
     pub max_slope: f64,
+    /// The largest mesh to make of it ([`MeshBudget::DEFAULT`] unless set).
+    pub mesh_budget: MeshBudget,
 }
 
 fn err(
@@ -262,6 +296,7 @@ impl Design {
             base_creases: (0, 0),
             max_curvature: 0.0,
             max_slope: 0.0,
+            mesh_budget: MeshBudget::DEFAULT,
             standard,
             params: p,
         };
@@ -313,6 +348,26 @@ impl Design {
                 "must be positive",
                 "give the layout height in mm",
             ));
+        }
+        // a layout shorter than a lens is wide has no lens to see, and
+        // its wall triangles degenerate
+        if h < p.period {
+            return Err(err(
+                Param::Height,
+                h,
+                format!("is shorter than one lens period ({} mm)", p.period),
+                format!("use a height of at least {} mm", p.period),
+            ));
+        }
+        for (param, v) in [(Param::Width, w), (Param::Height, h)] {
+            if v > MAX_LAYOUT_MM {
+                return Err(err(
+                    param,
+                    v,
+                    format!("is over {MAX_LAYOUT_MM} mm, larger than any printer or mold"),
+                    format!("use at most {MAX_LAYOUT_MM} mm"),
+                ));
+            }
         }
         let periods = w / p.period;
         let n = periods.round();

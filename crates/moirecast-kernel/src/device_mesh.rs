@@ -22,6 +22,14 @@ pub enum VertexOrigin {
 }
 
 impl VertexOrigin {
+    /// Whether the vertex is on the revealer (the device's top).
+    pub fn is_revealer(&self) -> bool {
+        matches!(
+            self,
+            VertexOrigin::RevealerCrease { .. } | VertexOrigin::RevealerLens { .. }
+        )
+    }
+
     /// The (t, v) parameters of this vertex on `lens`, if it lies on it.
     pub fn params_on(&self, lens: LensRef) -> Option<DVec2> {
         match (*self, lens) {

@@ -46,7 +46,8 @@ pub mod surface;
 pub mod tolerance;
 
 pub use design::{
-    BaseKind, BaseParams, Design, DesignParams, LensParams, LensRule, PrintedBase, StandardLens,
+    BaseKind, BaseParams, Design, DesignParams, LensParams, LensRule, MeshBudget, PrintedBase,
+    StandardLens,
 };
 pub use error::{DesignError, KernelError, Param};
 pub use mesh::Mesh;

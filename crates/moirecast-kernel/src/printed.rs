@@ -274,26 +274,38 @@ fn repair_wall_touches(
     let left = pinches(pos.len(), s_tris, on_s);
     if let Some(&v) = left.first() {
         let p = pos[v as usize];
-        return Err(KernelError::MeshCheck {
-            name: "band-touches-wall",
-            detail: format!(
-                "a band edge touches the side wall at ({:.4}, {:.4}) mm without crossing it, which would pinch a body to a line, and moving the sliver next to it did not help; change the width, the levels or the blur slightly",
+        return Err(band_touches_wall(
+            design,
+            format!(
+                "a band edge touches the side wall at ({:.4}, {:.4}) mm without crossing it, which would pinch a body to a line, and moving the sliver next to it did not help (band-touches-wall)",
                 p.x, p.y
             ),
-        });
+        ));
     }
     if found.max_shift_mm > design.tolerance.mm() {
-        return Err(KernelError::MeshCheck {
-            name: "band-touches-wall",
-            detail: format!(
-                "a band edge touches a side wall without crossing it at {} places; closing the pinch there moves the band's outline by {:.2} µm, more than the {:.2} µm tolerance; change the width, the levels or the blur slightly",
+        return Err(band_touches_wall(
+            design,
+            format!(
+                "a band edge touches a side wall without crossing it at {} places; closing the pinch there moves the band's outline by {:.2} µm, more than the {:.2} µm tolerance (band-touches-wall)",
                 found.touches,
                 found.max_shift_mm * 1e3,
                 design.tolerance.mm() * 1e3
             ),
-        });
+        ));
     }
     Ok(found)
+}
+
+/// A printed design refused because a band edge touches a side wall: a
+/// rule of the design (its elevation at the walls), named by its levels.
+fn band_touches_wall(design: &Design, problem: String) -> KernelError {
+    crate::DesignError {
+        param: crate::Param::Levels,
+        value: design.params.base.levels.to_string(),
+        problem,
+        fix: "change the width, the levels or the blur slightly".into(),
+    }
+    .into()
 }
 
 /// The side wall nearest to `p` (a point of the outline).

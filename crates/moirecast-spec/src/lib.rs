@@ -275,7 +275,7 @@ fn cast_material(lens: &LensTable, index: f64) -> Option<(&'static Material, boo
     match &lens.material {
         Some(m) => MATERIALS
             .iter()
-            .find(|mat| &mat.name == m)
+            .find(|mat| mat.name == m)
             .map(|m| (m, false)),
         None => MATERIALS
             .iter()
@@ -545,7 +545,9 @@ fn invalid(
     }
 }
 
-fn from_design_error(file: &str, e: DesignError) -> SpecError {
+/// A kernel design error as the user sees it: the key, the value, the
+/// problem and the fix.
+pub fn from_design_error(file: &str, e: DesignError) -> SpecError {
     SpecError::Invalid {
         file: file.to_owned(),
         key: key_of(e.param),

@@ -38,40 +38,56 @@ pub use crate::device_mesh::{DeviceMesh, MeshStats, Patch, Side, VertexOrigin};
 /// the revealer's and the base's vertices, then zip the lens strips and
 /// the walls between them.
 pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMesh> {
-    let plan = plan::plan(design, progress)?;
-    let revealer = revealer::vertices(design, &plan, progress)?;
+    let mut plan = plan::plan(design, progress)?;
+    plan.within_budget(design)?;
+    let mut revealer = revealer::vertices(design, &plan, progress)?;
     let (base_ys, base_rows) = base::rows(design, &plan, progress)?;
     progress.stage("triangles", 1);
-    let (mut dm, base_offsets) = with_vertices(design, &plan, &revealer, &base_rows);
-    let revealer_parts = revealer::strips(&dm);
-    let base_parts = base::strips(&dm, &base_ys, &base_rows, &base_offsets)?;
-    let wall_part = walls::strips(&dm, &base_rows, &base_offsets);
-    progress.tick(1);
-    let counts = [
-        revealer_parts.iter().map(|s| s.0.len()).sum(),
-        base_parts.iter().map(|s| s.0.len()).sum(),
-        wall_part.0.len(),
-    ];
-    let (mut tris, mut patches) = (Vec::new(), Vec::new());
-    for (t, p) in revealer_parts
-        .into_iter()
-        .chain(base_parts)
-        .chain([wall_part])
-    {
-        tris.extend(t);
-        patches.extend(p);
+    // Where an x-wall folds (a sparse revealer edge over a steep, wavy
+    // base edge), revealer rows are added there and the top remade.
+    for pass in 0.. {
+        let (mut dm, base_offsets) = with_vertices(design, &plan, &revealer, &base_rows);
+        let wall_part = walls::strips(&dm, &base_rows, &base_offsets);
+        let folds = walls::folds(&dm, &wall_part);
+        if !folds.is_empty() && pass < MAX_FOLD_PASSES {
+            plan.add_revealer_rows(&folds, design.half_height);
+            revealer = revealer::vertices(design, &plan, &crate::progress::Silent)?;
+            continue;
+        }
+        let revealer_parts = revealer::strips(&dm);
+        let base_parts = base::strips(&dm, &base_ys, &base_rows, &base_offsets)?;
+        progress.tick(1);
+        let counts = [
+            revealer_parts.iter().map(|s| s.0.len()).sum(),
+            base_parts.iter().map(|s| s.0.len()).sum(),
+            wall_part.0.len(),
+        ];
+        let (mut tris, mut patches) = (Vec::new(), Vec::new());
+        for (t, p) in revealer_parts
+            .into_iter()
+            .chain(base_parts)
+            .chain([wall_part])
+        {
+            tris.extend(t);
+            patches.extend(p);
+        }
+        dm.stats = stats(
+            design,
+            &plan,
+            (&base_ys, &base_rows),
+            dm.mesh.positions.len(),
+            counts,
+        );
+        dm.mesh.triangles = tris;
+        dm.patches = patches;
+        return Ok(dm);
     }
-    dm.stats = stats(
-        design,
-        &plan,
-        (&base_ys, &base_rows),
-        dm.mesh.positions.len(),
-        counts,
-    );
-    dm.mesh.triangles = tris;
-    dm.patches = patches;
-    Ok(dm)
+    unreachable!("the passes end")
 }
+
+/// Times revealer rows are added where a wall folds before the mesh is
+/// left to the `walls-face-out` check.
+const MAX_FOLD_PASSES: usize = 8;
 
 /// The mesh's vertices, revealer rows first, then the base rows; and the
 /// index of each base row's first vertex.

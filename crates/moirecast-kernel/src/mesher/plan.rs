@@ -39,6 +39,70 @@ pub(super) struct MeshPlan {
     pub crossing_rows: usize,
 }
 
+impl MeshPlan {
+    /// Triangles the plan makes, before the rows a wall's trim adds:
+    /// every revealer lens's columns on every revealer strip, every base
+    /// lens's on every base strip (as many base lenses as revealer lenses
+    /// cross a row), and the walls.
+    pub fn estimated_triangles(&self, lenses: usize) -> u64 {
+        let strips = |rows: &[f64]| rows.len().saturating_sub(1) as u64;
+        let revealer: u64 = self.revealer_columns.iter().map(|&c| c as u64).sum();
+        let base_mean = self.base_columns.values().map(|&c| c as f64).sum::<f64>()
+            / self.base_columns.len().max(1) as f64;
+        let base = (base_mean * lenses as f64).ceil() as u64;
+        let walls =
+            2 * (self.revealer_rows.len() + self.base_rows.len()) as u64 + 2 * (revealer + base);
+        2 * revealer * strips(&self.revealer_rows) + 2 * base * strips(&self.base_rows) + walls
+    }
+
+    /// Adds revealer rows at stations `ys` (for the built-in surfaces a
+    /// crease's y is its station), strictly inside the walls and clear of
+    /// the rows already there.
+    pub fn add_revealer_rows(&mut self, ys: &[f64], half_height: f64) {
+        let rows = &mut self.revealer_rows;
+        let min_gap = 1e-3 * (2.0 * half_height) / rows.len() as f64;
+        for &y in ys {
+            let at = rows.partition_point(|&r| r < y);
+            let clear =
+                at > 0 && at < rows.len() && y - rows[at - 1] > min_gap && rows[at] - y > min_gap;
+            if clear {
+                rows.insert(at, y);
+            }
+        }
+    }
+
+    /// Refuses a plan over the design's mesh budget, naming the estimate,
+    /// the limit and the fix.
+    pub fn within_budget(&self, design: &Design) -> Result<()> {
+        let Some(limit) = design.mesh_budget.max_triangles else {
+            return Ok(());
+        };
+        let estimate = self.estimated_triangles(design.lenses);
+        if estimate <= limit {
+            return Ok(());
+        }
+        let gb = |t: u64| t as f64 * crate::MeshBudget::BYTES_PER_TRIANGLE / 1e9;
+        // triangles fall as 1/tolerance along and across the lenses
+        let coarser = design.tolerance.mm() * estimate as f64 / limit as f64;
+        Err(crate::DesignError {
+            param: crate::Param::Tolerance,
+            value: design.tolerance.mm().to_string(),
+            problem: format!(
+                "the mesh would have about {:.1} M triangles (about {:.1} GB at a mold run's peak), over the budget of {:.0} M ({:.0} GB)",
+                estimate as f64 / 1e6,
+                gb(estimate),
+                limit as f64 / 1e6,
+                gb(limit)
+            ),
+            fix: format!(
+                "use a coarser mesh.tolerance (about {:.4} mm) or a smaller layout, or pass --allow-large",
+                coarser.min(crate::Tolerance::MAX_MM)
+            ),
+        }
+        .into())
+    }
+}
+
 /// Surveys every lens and plans the rows and columns of `design`'s mesh.
 pub(super) fn plan(design: &Design, progress: &dyn Progress) -> Result<MeshPlan> {
     let planner = Planner { design };

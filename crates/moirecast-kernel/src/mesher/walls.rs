@@ -83,3 +83,31 @@ pub(super) fn strips(dm: &DeviceMesh, base_rows: &[BaseRow], base_offsets: &[u32
     }
     (tris, patches)
 }
+
+/// Where the x-walls fold: for every triangle of the left or right wall
+/// whose normal points into the device, the height y of its edge on the
+/// base. A revealer row there gives the sparse top edge a vertex near the
+/// wavy bottom one, so the zip can take only triangles that face out.
+pub(super) fn folds(dm: &DeviceMesh, (tris, patches): &Strip) -> Vec<f64> {
+    let pos = &dm.mesh.positions;
+    let top = |v: u32| dm.origins[v as usize].is_revealer();
+    let mut ys = Vec::new();
+    for (t, patch) in tris.iter().zip(patches) {
+        let outward = match patch {
+            Patch::Wall(Side::Left) => DVec3::NEG_X,
+            Patch::Wall(Side::Right) => DVec3::X,
+            _ => continue,
+        };
+        let [a, b, c] = t.map(|v| pos[v as usize]);
+        if (b - a).cross(c - a).dot(outward) > 0.0 {
+            continue;
+        }
+        let bottom: Vec<f64> = t
+            .iter()
+            .filter(|&&v| !top(v))
+            .map(|&v| pos[v as usize].y)
+            .collect();
+        ys.push(bottom.iter().sum::<f64>() / bottom.len().max(1) as f64);
+    }
+    ys
+}
