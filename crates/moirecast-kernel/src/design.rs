@@ -156,6 +156,9 @@ pub mod limits {
     /// Largest d·κ of the offset and focal surfaces (METHOD §3 asks < 1; we
     /// keep 10 % so base lenses have room).
     pub const MAX_FOLD: f64 = 0.9;
+    /// Least depth of the base below the pitch surface, in mesh
+    /// tolerances: the two meshes may each stray by one tolerance.
+    pub const MIN_DEPTH_TOLERANCES: f64 = 4.0;
     /// Largest A·T·∂e/∂u (METHOD §4 asks < 1 − ε; ε = 0.1 keeps base lenses
     /// at most 10 periods wide).
     pub const MAX_SHIFT_SLOPE: f64 = 0.9;
@@ -584,6 +587,7 @@ impl Design {
             PitchSurface::Plane => "plane".into(),
         };
         let (mut kmax, mut smax, mut dmax, mut fold_at) = (0.0f64, 0.0f64, 0.0f64, DVec2::ZERO);
+        let mut shallowest = (f64::INFINITY, DVec2::ZERO);
         let (mut smax_inside, mut steep_at) = (0.0f64, DVec2::ZERO);
         let (hw, hh) = (self.params.width / 2.0, self.half_height);
         let mut worst_fold = 0.0f64;
@@ -612,6 +616,9 @@ impl Design {
             let k = jet.max_abs_curvature();
             let d_eff = self.base_offset(q.x, q.y);
             dmax = dmax.max(d_eff);
+            if d_eff < shallowest.0 {
+                shallowest = (d_eff, q);
+            }
             if d_eff * k > worst_fold {
                 worst_fold = d_eff * k;
                 fold_at = q;
@@ -627,6 +634,22 @@ impl Design {
         }
         self.max_curvature = kmax;
         self.max_slope = smax;
+        // the revealer and the base meshes, each within the tolerance of
+        // its surface, must not meet: the base at least MIN_DEPTH_TOLERANCES
+        // tolerances below the pitch surface
+        let min_depth = MIN_DEPTH_TOLERANCES * self.tolerance.mm();
+        if shallowest.0 < min_depth {
+            let at = shallowest.1;
+            return Err(err(
+                Param::BaseD,
+                format!("{:.4}", self.d),
+                format!(
+                    "the base lies only {:.4} mm below the pitch surface at layout ({:.1}, {:.1}) mm; it must lie at least {MIN_DEPTH_TOLERANCES} × the mesh tolerance ({min_depth} mm) below it, or the revealer and the base meet",
+                    shallowest.0, at.x, at.y
+                ),
+                format!("use d ≥ {min_depth} mm (D_s = {:.4} mm is the focal depth), or a finer mesh.tolerance", self.standard.focal_depth),
+            ));
+        }
         // The fold is checked first: a folding base is the root cause when both fail.
         if worst_fold >= MAX_FOLD {
             let allowed = MAX_FOLD / kmax;

@@ -49,6 +49,20 @@ impl Profile {
         Profile::Ramp { angle, length }
     }
 
+    /// The smallest length (mm) over which the elevation can bend: a
+    /// survey of the base must sample finer than this to see its
+    /// curvature. `None` for a profile with no such scale (flat, ramp).
+    pub fn detail_mm(&self) -> Option<f64> {
+        match self {
+            Profile::Flat | Profile::Ramp { .. } => None,
+            Profile::Rings { wavelength } => Some(wavelength / 4.0),
+            Profile::Bump { sigma } => Some(*sigma),
+            // the grid is as fine as the image and half the blur; its
+            // cubic interpolation bends over a few cells
+            Profile::Sampled(s) => Some(2.0 * s.spacing),
+        }
+    }
+
     /// e(x, y).
     pub fn value(&self, x: f64, y: f64) -> f64 {
         match self {
@@ -135,12 +149,16 @@ fn catmull_rom(t: f64) -> ([f64; 4], [f64; 4]) {
     (w, d)
 }
 
+/// Most grid cells a sampled profile holds (4 M: 32 MB of values).
+pub const MAX_PROFILE_CELLS: usize = 1 << 22;
+
 impl SampledProfile {
     /// Fits `raster` into the layout `width × height` (mm) keeping its aspect
     /// ratio (centred, "contain"), turns it into an elevation by `mode`,
     /// blurs it with a Gaussian of σ = `blur` mm and keeps a grid fine enough
     /// for both the image and the blur. Outside the image the border repeats.
-    /// Errors are plain messages; the caller names the parameter.
+    /// Errors are plain messages; the caller names the parameter. The grid
+    /// holds at most [`MAX_PROFILE_CELLS`] cells.
     pub fn from_raster(
         raster: &Raster,
         mode: ProfileMode,
@@ -155,10 +173,21 @@ impl SampledProfile {
         let px = (width / raster.width as f64).min(height / raster.height as f64); // mm per pixel
         let mut spacing = if blur > 0.0 { px.min(blur / 2.0) } else { px };
         spacing = spacing.max(width.max(height) / 1024.0);
-        let margin = 3.0 * blur + 4.0 * spacing;
+        // the grid with its blur margin: a blur far wider than a small
+        // layout would ask for billions of cells, so the spacing grows
+        // until the grid holds at most MAX_PROFILE_CELLS
+        let grid = |spacing: f64| {
+            let margin = 3.0 * blur + 4.0 * spacing;
+            let nx = ((width + 2.0 * margin) / spacing).ceil() as usize + 1;
+            let ny = ((height + 2.0 * margin) / spacing).ceil() as usize + 1;
+            (margin, nx, ny)
+        };
+        let (mut margin, mut nx, mut ny) = grid(spacing);
+        while nx.saturating_mul(ny) > MAX_PROFILE_CELLS {
+            spacing *= (nx as f64 * ny as f64 / MAX_PROFILE_CELLS as f64).sqrt() * 1.01;
+            (margin, nx, ny) = grid(spacing);
+        }
         let origin = DVec2::new(-width / 2.0 - margin, -height / 2.0 - margin);
-        let nx = ((width + 2.0 * margin) / spacing).ceil() as usize + 1;
-        let ny = ((height + 2.0 * margin) / spacing).ceil() as usize + 1;
         let lum = |x: f64, y: f64| -> f64 {
             // bilinear in pixel-centre coordinates, border clamped
             let fx =

@@ -73,8 +73,14 @@ pub(super) fn rows(
     // Where an x-wall cuts a base lens, the trim curve between two rows is
     // one edge: refine until its cut moves by at most one column per strip,
     // so the trim edge meets the same chordal bound as the lens columns.
+    // A crease that crosses an x-wall and back within one survey cell was
+    // missed by the plan: such a pair of rows disagrees on which lenses
+    // are inside, and the crossings between them are found and added.
     for _pass in 0..8 {
-        let extra = trim_rows(&base_rows, &base_row_data, base_columns);
+        let mut extra = trim_rows(&base_rows, &base_row_data, base_columns);
+        if extra.is_empty() {
+            extra = missed_crossings(d, &base_rows, &base_row_data)?;
+        }
         if extra.is_empty() {
             break;
         }
@@ -92,6 +98,66 @@ pub(super) fn rows(
         }
     }
     Ok((base_rows, base_row_data))
+}
+
+/// Heights y (sorted, distinct) where a base crease crosses an x-wall
+/// between two rows that disagree on whether a lens is inside the
+/// outline: found by sampling the crease's distance to each wall finely
+/// over the stations that can reach between the rows.
+fn missed_crossings(d: &Design, ys: &[f64], rows: &[BaseRow]) -> Result<Vec<f64>> {
+    const SAMPLES: usize = 512;
+    // a lens with two or more vertices on one row and none on the next
+    // (what `strips` cannot zip)
+    let unmatched = |a: &BaseRow, b: &BaseRow| -> Vec<i64> {
+        a.lenses
+            .iter()
+            .filter(|(k, poly)| poly.len() > 1 && !b.lenses.contains_key(k))
+            .map(|(&k, _)| k)
+            .collect()
+    };
+    let mut found = Vec::new();
+    for r in 0..rows.len() - 1 {
+        let (y0, y1) = (ys[r], ys[r + 1]);
+        let mut lenses = unmatched(&rows[r], &rows[r + 1]);
+        lenses.extend(unmatched(&rows[r + 1], &rows[r]));
+        for k in lenses {
+            for crease in [k, k + 1] {
+                for wall in [d.outline_x.0, d.outline_x.1] {
+                    // the base lies up to the margin off its station in y
+                    let (v0, v1) = (y0 - d.margin, y1 + d.margin);
+                    let g = |v: f64| {
+                        d.base_crease_point(crease, v)
+                            .map(|p| (p.x - wall, p.y))
+                            .unwrap_or((f64::NAN, f64::NAN))
+                    };
+                    let mut last = g(v0);
+                    for i in 1..=SAMPLES {
+                        let v = v0 + (v1 - v0) * i as f64 / SAMPLES as f64;
+                        let here = g(v);
+                        if (last.0 > 0.0) != (here.0 > 0.0)
+                            && last.0.is_finite()
+                            && here.0.is_finite()
+                        {
+                            let root = crate::solve::bracketed_secant(
+                                v - (v1 - v0) / SAMPLES as f64,
+                                v,
+                                &|| format!("base crease {crease} meeting the wall x = {wall}"),
+                                |v| g(v).0,
+                            )?;
+                            let y = d.base_crease_point(crease, root)?.y;
+                            if y > y0 + 1e-9 && y < y1 - 1e-9 {
+                                found.push(y);
+                            }
+                        }
+                        last = here;
+                    }
+                }
+            }
+        }
+    }
+    found.sort_by(f64::total_cmp);
+    found.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    Ok(found)
 }
 
 /// Heights of the rows to add (sorted, distinct) so that, between two

@@ -20,6 +20,8 @@ pub(super) const ACROSS_SHARE: f64 = 0.45;
 pub(super) const ALONG_SHARE: f64 = 0.4;
 /// Cells of the curvature survey along y.
 const SURVEY_CELLS: usize = 256;
+/// Most cells of the base's survey, however fine its profile.
+const MAX_SURVEY_CELLS: usize = 16384;
 
 /// Where the rows and columns go.
 pub(super) struct MeshPlan {
@@ -202,11 +204,25 @@ impl<'a> Planner<'a> {
         self.design.tolerance.mm()
     }
 
-    /// Survey stations: uniform over [−H/2 − pad, H/2 + pad].
-    fn survey_stations(&self, pad: f64) -> (Vec<f64>, f64) {
+    /// Survey stations: `cells` uniform cells over [−H/2 − pad, H/2 + pad].
+    fn survey_stations(&self, pad: f64, cells: usize) -> (Vec<f64>, f64) {
         let hh = self.design.half_height + pad;
-        let h = 2.0 * hh / SURVEY_CELLS as f64;
-        ((0..=SURVEY_CELLS).map(|s| -hh + s as f64 * h).collect(), h)
+        let h = 2.0 * hh / cells as f64;
+        ((0..=cells).map(|s| -hh + s as f64 * h).collect(), h)
+    }
+
+    /// Cells of the base's survey: [`SURVEY_CELLS`], or as many as it takes
+    /// for a cell to be a quarter of the profile's detail where the
+    /// usual cells are more than twice that (a sharp image on a long
+    /// layout), so the base creases' curvature along y is seen.
+    fn base_survey_cells(&self, pad: f64) -> usize {
+        let length = 2.0 * (self.design.half_height + pad);
+        match self.design.params.profile.detail_mm() {
+            Some(detail) if length / SURVEY_CELLS as f64 > 2.0 * detail => {
+                ((4.0 * length / detail).ceil() as usize).clamp(SURVEY_CELLS, MAX_SURVEY_CELLS)
+            }
+            _ => SURVEY_CELLS,
+        }
     }
 
     /// Surveys one lens from its station arcs: the columns that meet the
@@ -264,7 +280,7 @@ impl<'a> Planner<'a> {
     /// Revealer: columns per lens, and rows (stations).
     fn revealer_plan(&self) -> (Vec<usize>, Vec<f64>, f64) {
         let d = self.design;
-        let (stations, h) = self.survey_stations(0.0);
+        let (stations, h) = self.survey_stations(0.0, SURVEY_CELLS);
         let surveys: Vec<LensSurvey> = (0..d.lenses as i64)
             .into_par_iter()
             .map(|i| {
@@ -309,13 +325,14 @@ impl<'a> Planner<'a> {
     )> {
         let d = self.design;
         let pad = d.margin.min(d.half_height);
-        let (stations, h) = self.survey_stations(pad);
+        let cells = self.base_survey_cells(pad);
+        let (stations, h) = self.survey_stations(pad, cells);
         let (xl, xr) = d.outline_x;
         let hh = d.half_height;
         let (k0, k1) = d.base_creases;
         let cell_of = |y: f64| {
-            (((y + hh) / (2.0 * hh) * SURVEY_CELLS as f64).floor() as isize)
-                .clamp(0, SURVEY_CELLS as isize - 1) as usize
+            (((y + hh) / (2.0 * hh) * cells as f64).floor() as isize).clamp(0, cells as isize - 1)
+                as usize
         };
         // every crease once per station (two lenses share it), each solve
         // starting from the crease's last
@@ -349,7 +366,7 @@ impl<'a> Planner<'a> {
             })
             .collect();
         let mut columns = BTreeMap::new();
-        let mut kcell = vec![0.0f64; SURVEY_CELLS];
+        let mut kcell = vec![0.0f64; cells];
         let mut creases = Vec::new();
         for (k, s) in &surveys {
             columns.insert(*k, s.columns);
