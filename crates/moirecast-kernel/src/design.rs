@@ -701,7 +701,12 @@ impl Design {
             ));
         }
         self.margin = dmax + (self.params.base.levels + 2.0) * self.params.period;
-        // Equal-radius lenses must span their chords.
+        self.validate_equal_radius_chords()
+    }
+
+    /// Equal-radius lenses must span their chords (a lens of radius r
+    /// cannot bridge a chord longer than 2r).
+    fn validate_equal_radius_chords(&self) -> Result<(), DesignError> {
         if self.params.lens.rule == LensRule::EqualRadius {
             let mut wmax = 0.0f64;
             for i in 0..self.lenses as i64 {
