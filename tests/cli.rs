@@ -475,9 +475,21 @@ const BAD: &[(&str, &str, &str, &str)] = &[
     ),
     (
         "folding offset",
-        "d = \"focal\"|d = 45.0",
+        "radius = 40.0|radius = 3.0&&d = \"focal\"|d = 3.2",
         "base.d",
         "folds",
+    ),
+    (
+        "base below twice the focal depth",
+        "d = \"focal\"|d = 4.0",
+        "base.d",
+        "2 focal depths",
+    ),
+    (
+        "index near 1 (a focal depth of hundreds of periods)",
+        "index = 1.41|index = 1.0001",
+        "lens.index",
+        "at most 50 periods",
     ),
     (
         "offset below zero",
@@ -562,9 +574,13 @@ const BAD: &[(&str, &str, &str, &str)] = &[
 #[test]
 fn bad_specs_name_the_key_and_write_nothing() {
     for (i, (what, edit, key, phrase)) in BAD.iter().enumerate() {
-        let (from, to) = edit.split_once('|').unwrap();
-        assert!(SMALL.contains(from), "{what}: edit does not apply");
-        let spec = SMALL.replacen(from, to, 1);
+        // edits joined by `&&`, each `from|to`
+        let mut spec = SMALL.to_string();
+        for edit in edit.split("&&") {
+            let (from, to) = edit.split_once('|').unwrap();
+            assert!(spec.contains(from), "{what}: edit does not apply");
+            spec = spec.replacen(from, to, 1);
+        }
         let dir = scratch(&format!("bad-{i}"));
         let (ok, err, out) = run(&spec, &dir);
         assert!(!ok, "{what}: the spec was accepted");

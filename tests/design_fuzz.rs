@@ -125,10 +125,11 @@ fn draw(rng: &mut Rng, with_mold: bool) -> String {
         rng.uniform(0.5, 40.0)
     };
     let width = lenses * period;
-    let height = match rng.next() % 10 {
+    let height = match rng.next() % 20 {
         0 => width * rng.log(0.001, 0.05),
-        1 => width * rng.log(5.0, 60.0),
-        _ => rng.log(0.5, 60.0),
+        1 | 2 => width * rng.log(5.0, 60.0),
+        3 => period * rng.log(1.0, 3.0),
+        _ => rng.log(1.0, 40.0),
     };
     writeln!(
         t,
@@ -236,7 +237,12 @@ fn draw(rng: &mut Rng, with_mold: bool) -> String {
     }
     writeln!(t, "blur = {}", num(rng.log(0.05, 8.0))).unwrap();
     // [mesh]
-    writeln!(t, "[mesh]\ntolerance = {}", num(rng.log(5e-5, 0.15))).unwrap();
+    let tolerance = if rng.chance(0.85) {
+        rng.log(5e-4, 0.03)
+    } else {
+        rng.log(5e-5, 0.15)
+    };
+    writeln!(t, "[mesh]\ntolerance = {}", num(tolerance)).unwrap();
     if with_mold {
         writeln!(t, "[mold]").unwrap();
         for (key, lo, hi) in [

@@ -159,6 +159,13 @@ pub mod limits {
     /// Least depth of the base below the pitch surface, in mesh
     /// tolerances: the two meshes may each stray by one tolerance.
     pub const MIN_DEPTH_TOLERANCES: f64 = 4.0;
+    /// Deepest base, in focal depths D_s: at depth d a revealer lens's
+    /// bundle spans T·|d − D_s|/D_s, a whole period at 2 D_s, so a deeper
+    /// base averages every band away (no moiré).
+    pub const MAX_DEPTH_FOCAL: f64 = 2.0;
+    /// Longest focal depth D_s, in periods: a lens this weak (an index
+    /// near 1) needs a device hundreds of periods thick.
+    pub const MAX_FOCAL_PERIODS: f64 = 50.0;
     /// Largest A·T·∂e/∂u (METHOD §4 asks < 1 − ε; ε = 0.1 keeps base lenses
     /// at most 10 periods wide).
     pub const MAX_SHIFT_SLOPE: f64 = 0.9;
@@ -273,6 +280,7 @@ impl Design {
     pub fn new(p: DesignParams) -> Result<Design, DesignError> {
         let (n, index, base_afov) = Self::check_ranges(&p)?;
         let standard = StandardLens::new(p.period, p.lens.afov, index);
+        Self::check_focal_depth(&p, &standard, index)?;
         let (d, tolerance) = Self::depth_and_tolerance(&p, &standard)?;
         let revealer_rule = match p.lens.rule {
             LensRule::ConstantAfov => ArcRule::ConstantAfov {
@@ -461,12 +469,37 @@ impl Design {
         Ok((n, index, base_afov))
     }
 
+    /// The standard lens must focus within [`limits::MAX_FOCAL_PERIODS`]
+    /// periods (an index near 1 focuses hundreds of periods deep).
+    fn check_focal_depth(
+        p: &DesignParams,
+        standard: &StandardLens,
+        index: f64,
+    ) -> Result<(), DesignError> {
+        use limits::MAX_FOCAL_PERIODS;
+        let periods = standard.focal_depth / p.period;
+        if periods > MAX_FOCAL_PERIODS {
+            return Err(err(
+                Param::Index,
+                index,
+                format!(
+                    "lenses of index {index} and {:.1}° AFOV focus {periods:.0} periods deep (D_s = {:.4} mm); at most {MAX_FOCAL_PERIODS} periods are allowed",
+                    p.lens.afov.to_degrees(),
+                    standard.focal_depth
+                ),
+                "use a higher index (cast silicone is 1.41) or another lens.afov",
+            ));
+        }
+        Ok(())
+    }
+
     /// The offset distance d actually used and the mesh tolerance, with
     /// the surface's radius checked.
     fn depth_and_tolerance(
         p: &DesignParams,
         standard: &StandardLens,
     ) -> Result<(f64, Tolerance), DesignError> {
+        use limits::MAX_DEPTH_FOCAL;
         let d = match p.base.d {
             None => standard.focal_depth,
             Some(d) => {
@@ -477,6 +510,20 @@ impl Design {
                         d,
                         "the base must lie below the pitch surface: d > 0",
                         format!("use \"focal\" (D_s = {:.4} mm)", standard.focal_depth),
+                    ));
+                }
+                if d > MAX_DEPTH_FOCAL * standard.focal_depth {
+                    return Err(err(
+                        Param::BaseD,
+                        d,
+                        format!(
+                            "the base lies more than {MAX_DEPTH_FOCAL} focal depths (D_s = {:.4} mm) below the surface: each lens's bundle then spans a whole period or more, and the moiré averages away",
+                            standard.focal_depth
+                        ),
+                        format!(
+                            "use d ≤ {:.4} mm, or \"focal\"",
+                            MAX_DEPTH_FOCAL * standard.focal_depth
+                        ),
                     ));
                 }
                 d

@@ -215,13 +215,20 @@ impl<'a> Planner<'a> {
     /// for a cell to be a quarter of the profile's detail where the
     /// usual cells are more than twice that (a sharp image on a long
     /// layout), so the base creases' curvature along y is seen.
+    ///
+    /// A pad beyond the layout's own height (a base lying far off its
+    /// stations) adds cells in proportion, so the cells over the layout
+    /// stay as fine as the usual ones.
     fn base_survey_cells(&self, pad: f64) -> usize {
-        let length = 2.0 * (self.design.half_height + pad);
+        let hh = self.design.half_height;
+        let length = 2.0 * (hh + pad);
+        let usual = ((SURVEY_CELLS as f64 * (hh + pad) / (hh + pad.min(hh))).ceil() as usize)
+            .clamp(SURVEY_CELLS, MAX_SURVEY_CELLS);
         match self.design.params.profile.detail_mm() {
-            Some(detail) if length / SURVEY_CELLS as f64 > 2.0 * detail => {
-                ((4.0 * length / detail).ceil() as usize).clamp(SURVEY_CELLS, MAX_SURVEY_CELLS)
+            Some(detail) if length / usual as f64 > 2.0 * detail => {
+                ((4.0 * length / detail).ceil() as usize).clamp(usual, MAX_SURVEY_CELLS)
             }
-            _ => SURVEY_CELLS,
+            _ => usual,
         }
     }
 
@@ -324,7 +331,10 @@ impl<'a> Planner<'a> {
         Vec<(i64, Vec<(f64, DVec3)>)>,
     )> {
         let d = self.design;
-        let pad = d.margin.min(d.half_height);
+        // the base lies up to the margin off its station (a base offset
+        // along a normal that leans in y): survey every station that can
+        // land inside the outline
+        let pad = d.margin;
         let cells = self.base_survey_cells(pad);
         let (stations, h) = self.survey_stations(pad, cells);
         let (xl, xr) = d.outline_x;
@@ -370,6 +380,12 @@ impl<'a> Planner<'a> {
         let mut creases = Vec::new();
         for (k, s) in &surveys {
             columns.insert(*k, s.columns);
+            // Where the base lies far off its stations in y (an offset
+            // along a normal that leans in y), neighbouring stations land
+            // several cells apart: the cells between take their larger
+            // curvature (a gap of one or two cells is covered by the
+            // neighbours the row spacing reads anyway).
+            let mut last: Option<(usize, usize)> = None; // (station, cell)
             for (idx, (&y, p)) in s.ys.iter().zip(&s.first).enumerate() {
                 let inside = p.x >= xl - d.params.period * 10.0
                     && p.x <= xr + d.params.period * 10.0
@@ -377,6 +393,15 @@ impl<'a> Planner<'a> {
                 if inside {
                     let c = cell_of(y);
                     kcell[c] = kcell[c].max(s.k_eff[idx]);
+                    if let Some((i0, c0)) = last.filter(|&(i0, _)| i0 + 1 == idx) {
+                        if c.abs_diff(c0) >= 4 {
+                            let k = s.k_eff[i0].max(s.k_eff[idx]);
+                            for cell in &mut kcell[c.min(c0) + 1..c.max(c0)] {
+                                *cell = cell.max(k);
+                            }
+                        }
+                    }
+                    last = Some((idx, c));
                 }
             }
             creases.push((
