@@ -46,6 +46,7 @@ fn main() {
                         tilt_along: 0.0,
                         camera: Default::default(),
                         lighting: Lighting::default_for(design),
+                        integrator: Default::default(),
                         seed: 1,
                     },
                 );

@@ -10,7 +10,7 @@ use moirecast_export::OutputSet;
 use moirecast_kernel::check::SolidMesh;
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{BaseKind, Design};
-use moirecast_render::frame::{render_scored, traced_mesh, Camera, Lighting, View};
+use moirecast_render::frame::{render_scored, traced_mesh, Camera, Integrator, Lighting, View};
 use moirecast_render::sheet::{contact_sheet, to_rgb8, Rgb8};
 use moirecast_render::Scene;
 use moirecast_spec::Spec;
@@ -31,6 +31,7 @@ pub struct RenderOptions {
     /// Eye distance (mm) of a perspective camera; `None` is orthographic.
     pub camera_distance_mm: Option<f64>,
     pub lights: LightsChoice,
+    pub integrator: Integrator,
     pub seed: u64,
 }
 
@@ -120,6 +121,7 @@ impl RenderOptions {
                 Some(distance) => Camera::Perspective { distance },
             },
             lighting,
+            integrator: self.integrator,
             seed: self.seed,
         }
     }
@@ -135,6 +137,9 @@ struct FrameReport {
     local_fidelity: f64,
     /// Mean Rec. 709 luminance of the frame's linear colours.
     mean_luminance: f64,
+    /// Mean weight per camera ray that the branching integrator dropped
+    /// (branches under its weight or past its depth).
+    dropped_weight: f64,
 }
 
 #[derive(Serialize)]
@@ -150,6 +155,7 @@ struct RenderReport {
     /// "orthographic", or the perspective eye's distance from the device's centre.
     camera: String,
     light: String,
+    integrator: String,
     frames: Vec<FrameReport>,
     /// The frame with the highest local fidelity, and its two fidelities.
     best_frame: usize,
@@ -249,6 +255,7 @@ pub fn run_render(
             fidelity,
             local_fidelity: frame.local_fidelity(),
             mean_luminance: frame.mean_luminance(),
+            dropped_weight: frame.dropped_weight,
         });
         images.push(image);
         progress.tick(1);
@@ -285,6 +292,7 @@ pub fn run_render(
             Some(d) => format!("perspective, eye {d} mm from the device's centre"),
         },
         light: lighting.describe(),
+        integrator: options.integrator.describe(),
         best_frame: best,
         best_fidelity: reports.get(best).map_or(0.0, |r| r.fidelity),
         best_local_fidelity: reports.get(best).map_or(0.0, |r| r.local_fidelity),

@@ -5,7 +5,7 @@
 //! its black bands, with stratified supersampling. Deterministic for a seed.
 
 use crate::scene::Scene;
-use crate::trace::{trace_path, SplitMix64};
+use crate::trace::{trace_branches, trace_path, Pruning, SplitMix64};
 use glam::{DMat3, DVec3};
 use moirecast_kernel::mesher::DeviceMesh;
 use moirecast_kernel::{BaseKind, Design, KernelError, Mesh, PitchSurface};
@@ -25,7 +25,41 @@ pub struct View {
     pub tilt_along: f64,
     pub camera: Camera,
     pub lighting: Lighting,
+    pub integrator: Integrator,
+    /// Seed of the sample jitter (and of the path tracer's choices).
     pub seed: u64,
+}
+
+/// How a pixel's light is integrated over the branches at each interface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Integrator {
+    /// Every branch followed with its Fresnel weight: the exact expectation,
+    /// no noise but the sample jitter's ([`trace_branches`]).
+    Branching(Pruning),
+    /// Monte Carlo path tracing, one branch at random ([`trace_path`]):
+    /// the reference.
+    Path,
+}
+
+/// The path tracer stays the default until the branching integrator's
+/// pixel sampling is as clean as its branches (issue 19).
+impl Default for Integrator {
+    fn default() -> Self {
+        Integrator::Path
+    }
+}
+
+impl Integrator {
+    /// What it is, for reports.
+    pub fn describe(&self) -> String {
+        match self {
+            Integrator::Branching(p) => format!(
+                "branching: both Fresnel branches followed at every interface, those under {} of a ray's weight or past {} interfaces dropped",
+                p.min_weight, p.max_depth
+            ),
+            Integrator::Path => "path: Monte Carlo, one Fresnel branch chosen at random per interface".into(),
+        }
+    }
 }
 
 /// How rays leave the camera.
@@ -55,6 +89,9 @@ pub struct Frame {
     pub phase: Vec<f64>,
     /// Pixels per lens period.
     pub period_px: f64,
+    /// Mean weight per camera ray the branching integrator dropped
+    /// (0 for the path tracer, whose dropped paths are its noise).
+    pub dropped_weight: f64,
 }
 
 impl Frame {
@@ -240,11 +277,13 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
     // the stratum whose sample gives the pixel its phase: the central one
     let central = (n / 2) * n + n / 2;
     let (width, height) = (view.width, view.height);
-    // the colour and phase of pixel (px, py)
-    let pixel_of = |px: usize, py: usize| -> (DVec3, f64) {
+    // the colour, phase and dropped weight of pixel (px, py)
+    let index = design.params.lens.index;
+    let colour_of = |d: DVec3| lighting.colour(d);
+    let pixel_of = |px: usize, py: usize| -> (DVec3, f64, f64) {
         let p = py * width + px;
         let mut rng = SplitMix64(view.seed ^ (p as u64).wrapping_mul(0x2545_F491_4F6C_DD1D));
-        let (mut sum, mut phase) = (DVec3::ZERO, f64::NAN);
+        let (mut sum, mut phase, mut dropped) = (DVec3::ZERO, f64::NAN, 0.0);
         for s in 0..n * n {
             let (sx, sy) = (s % n, s / n);
             let fx = (px as f64 + (sx as f64 + rng.next_f64()) / n as f64) / width as f64 - 0.5;
@@ -252,32 +291,48 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
             let target =
                 centre + du * (fx * pixel * width as f64) + dv * (fy * pixel * height as f64);
             let (origin, d) = ray(target);
-            let end = trace_path(scene, design.params.lens.index, origin, d, &mut rng);
-            sum += end.leaves.map_or(DVec3::ZERO, |l| lighting.colour(l));
+            let first = match view.integrator {
+                Integrator::Path => {
+                    let end = trace_path(scene, index, origin, d, &mut rng);
+                    sum += end.leaves.map_or(DVec3::ZERO, |l| lighting.colour(l));
+                    end.first
+                }
+                Integrator::Branching(pruning) => {
+                    let b = trace_branches(scene, index, origin, d, &colour_of, pruning);
+                    sum += b.colour;
+                    dropped += b.dropped;
+                    b.first
+                }
+            };
             if s == central {
                 // the layout point this sample sees first, if on the device's top
-                if let Some((q, _)) = end.first.filter(|(_, nrm)| nrm.z > 0.0) {
+                if let Some((q, _)) = first.filter(|(_, nrm)| nrm.z > 0.0) {
                     let (u, v) = layout_of(design, q.x, q.y);
                     phase = (levels * design.params.profile.value(u, v)).rem_euclid(1.0);
                 }
             }
         }
-        (sum / (n * n) as f64, phase)
+        let samples = (n * n) as f64;
+        (sum / samples, phase, dropped / samples)
     };
     let mut rgb = vec![DVec3::ZERO; width * height];
     let mut phase = vec![f64::NAN; width * height];
+    let mut dropped = vec![0.0; width * height];
     // bands of TILE rows in parallel, each traced tile by tile, written in place
-    rgb.par_chunks_mut((width * TILE).max(1))
-        .zip(phase.par_chunks_mut((width * TILE).max(1)))
+    let band = (width * TILE).max(1);
+    rgb.par_chunks_mut(band)
+        .zip(phase.par_chunks_mut(band))
+        .zip(dropped.par_chunks_mut(band))
         .enumerate()
-        .for_each(|(band, (rgb, phase))| {
+        .for_each(|(b, ((rgb, phase), dropped))| {
             let rows = rgb.len() / width.max(1);
             for x0 in (0..width).step_by(TILE) {
                 for y in 0..rows {
                     for px in x0..(x0 + TILE).min(width) {
-                        let (c, ph) = pixel_of(px, band * TILE + y);
+                        let (c, ph, dr) = pixel_of(px, b * TILE + y);
                         rgb[y * width + px] = c;
                         phase[y * width + px] = ph;
+                        dropped[y * width + px] = dr;
                     }
                 }
             }
@@ -289,6 +344,7 @@ pub fn render(design: &Design, scene: &Scene, view: View) -> Frame {
         rgb,
         phase,
         period_px: design.params.period / pixel,
+        dropped_weight: dropped.iter().sum::<f64>() / dropped.len().max(1) as f64,
     }
 }
 

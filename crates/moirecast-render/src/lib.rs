@@ -25,6 +25,7 @@
 //!     tilt_along: 0.0,
 //!     camera: Camera::Orthographic,
 //!     lighting: Lighting::default_for(&design),
+//!     integrator: Default::default(),
 //!     seed: 1,
 //! });
 //! assert_eq!(frame.rgb.len(), 32 * 32);

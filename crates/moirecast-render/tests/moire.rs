@@ -81,6 +81,7 @@ fn lit_frame(
             tilt_along: 0.0,
             camera: Camera::Orthographic,
             lighting,
+            integrator: Default::default(),
             seed,
         },
     )
@@ -163,6 +164,7 @@ fn a_far_perspective_camera_approaches_the_orthographic_one() {
         tilt_along: 0.0,
         camera,
         lighting: Lighting::default_for(&d),
+        integrator: Default::default(),
         seed: 3,
     };
     let score = |f: &Frame| f.fidelity();
