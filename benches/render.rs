@@ -1,12 +1,14 @@
 //! Benchmark of `moirecast render` on the reference design (or SPEC):
 //! the scene (BVH) build, and then one frame of that scene at 256 × 256 and 512 × 512 with
-//! one sample per pixel, as medians over repeated runs.
+//! one sample per pixel, as medians over repeated runs, with each
+//! integrator (the path tracer, the default, and the branching one).
 //!
 //! `cargo bench --bench render [-- SPEC [RUNS]]`
 
 use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::Silent;
-use moirecast_render::frame::{render, Lighting, View};
+use moirecast_render::frame::{render, Integrator, Lighting, View};
+use moirecast_render::trace::Pruning;
 use moirecast_render::Scene;
 use std::time::Instant;
 
@@ -30,7 +32,13 @@ fn main() {
         .collect();
     println!("scene (BVH)       {:8.1} ms", median(scene_t) * 1e3);
     let scene = Scene::new(&dm.mesh);
-    for size in [256, 512] {
+    let integrators = [
+        ("path", Integrator::Path),
+        ("branching", Integrator::Branching(Pruning::DEFAULT)),
+    ];
+    for (size, (name, integrator)) in
+        [256, 512].into_iter().flat_map(|s| integrators.map(|i| (s, i)))
+    {
         let mut fid = (0.0, 0.0);
         let times: Vec<f64> = (0..runs)
             .map(|_| {
@@ -46,7 +54,7 @@ fn main() {
                         tilt_along: 0.0,
                         camera: Default::default(),
                         lighting: Lighting::default_for(design),
-                        integrator: Default::default(),
+                        integrator,
                         seed: 1,
                     },
                 );
@@ -56,7 +64,7 @@ fn main() {
             })
             .collect();
         println!(
-            "frame {size} x {size}  {:8.1} ms  (scene built once, above; 1 sample per pixel; fidelity {:.3}, local {:.3})",
+            "frame {size} x {size}  {:8.1} ms  ({name}; scene built once, above; 1 sample per pixel; fidelity {:.3}, local {:.3})",
             median(times) * 1e3,
             fid.0,
             fid.1

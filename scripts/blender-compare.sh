@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Blender Cycles against `moirecast render` on the same device.stl, camera
 # and light (issue 6's comparison; a benchmark, not a test: it needs
-# Debian's blender, a 640 MB install: apt-get install blender).
+# Debian's blender, a 640 MB install, and the numpy its Python imports:
+# apt-get install blender python3-numpy).
 #
 #   scripts/blender-compare.sh [SPEC [SIZE [TILT [CYCLES_SAMPLES [LIGHTS]]]]]
 #
