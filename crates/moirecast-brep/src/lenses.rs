@@ -21,6 +21,7 @@ use crate::spline::{clamped_knots, interpolate};
 use glam::DVec3;
 use moirecast_kernel::lens::LensArc;
 use moirecast_kernel::model::BaseSection;
+use moirecast_kernel::profile::Profile;
 use moirecast_kernel::Design;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -100,6 +101,20 @@ pub fn distance_to_arc(arc: &LensArc, q: glam::DVec3) -> f64 {
     }
 }
 
+/// The stations' first spacing: [`FIRST_SPACING_MM`], or a procedural
+/// profile's detail where that is finer (rings a few periods across bend the
+/// base creases within a fraction of a millimetre; stations mid-test only
+/// their midpoints, so stations sparser than the detail alias and never
+/// converge). A sampled image's detail is its grid's, far finer than its
+/// blur lets it bend: refinement finds its stations.
+fn first_spacing(design: &Design) -> f64 {
+    let detail = match design.params.profile {
+        Profile::Sampled(_) => None,
+        ref procedural => procedural.detail_mm(),
+    };
+    detail.map_or(FIRST_SPACING_MM, |d| d.min(FIRST_SPACING_MM))
+}
+
 /// Which array a family of lens surfaces belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Array {
@@ -128,7 +143,7 @@ impl LensFamily {
         fit: f64,
     ) -> Result<LensFamily, BrepError> {
         let (lo, hi) = v_range;
-        let spans = ((hi - lo) / FIRST_SPACING_MM).ceil().max(2.0) as usize;
+        let spans = ((hi - lo) / first_spacing(design)).ceil().max(2.0) as usize;
         let mut stations: Vec<f64> = (0..=spans)
             .map(|j| {
                 if j == spans {
