@@ -366,6 +366,7 @@ fn row_creases(d: &Design, y: f64) -> Result<Vec<(f64, DVec3)>> {
         };
         let mut v = v_guess;
         let mut found = None;
+        let mut last_residual = f64::INFINITY;
         for _ in 0..40 {
             let (p, u) = point(v, u_near)?;
             u_near = Some(u);
@@ -374,6 +375,14 @@ fn row_creases(d: &Design, y: f64) -> Result<Vec<(f64, DVec3)>> {
                 found = Some(p);
                 break;
             }
+            // the slope is shared by the row's creases; where it no longer
+            // fits this crease (the residual fell by less than half: a
+            // surface whose dy/dv changes across the row), it is measured
+            // again here
+            if r.abs() > 0.5 * last_residual {
+                slope = None;
+            }
+            last_residual = r.abs();
             let dydv = match slope {
                 Some(s) => s,
                 None => {
