@@ -470,6 +470,10 @@ impl<'a> Planner<'a> {
 /// Inserts crossing rows into `rows` (sorted, boundaries first and last).
 /// A crossing close to a free interior row replaces it, so no sliver strips
 /// appear; boundary rows and crossings already placed are never moved.
+/// Crossings closer than this (mm) to a pinned row join it: half the wall
+/// snap, twice the least triangle altitude.
+const MERGE_CROSSING_MM: f64 = WALL_SNAP_MM / 2.0;
+
 fn insert_rows(rows: &mut Vec<f64>, crossings: &[f64]) {
     let mut pinned = vec![false; rows.len()];
     pinned[0] = true;
@@ -478,7 +482,16 @@ fn insert_rows(rows: &mut Vec<f64>, crossings: &[f64]) {
         let pos = rows.partition_point(|&r| r < y);
         let (lo, hi) = (rows[pos - 1], rows[pos.min(rows.len() - 1)]);
         let gap = hi - lo;
-        if (y - lo).abs() < 1e-9 || (hi - y).abs() < 1e-9 {
+        // a crossing this close to a pinned row (a wall, or a crossing: a
+        // crease grazing the wall crosses it twice) is that row's: the
+        // crease strays less than the wall snap from the wall between them,
+        // and a row of its own would leave triangles thinner than the
+        // degenerate-triangle check allows
+        if (y - lo).abs() < 1e-9
+            || (hi - y).abs() < 1e-9
+            || (pinned[pos - 1] && y - lo < MERGE_CROSSING_MM)
+            || (pinned[pos.min(rows.len() - 1)] && hi - y < MERGE_CROSSING_MM)
+        {
             continue;
         }
         if !pinned[pos - 1] && y - lo < 0.1 * gap {
