@@ -603,6 +603,23 @@ impl Site<'_> {
                         p.vent_diameter,
                         if p.flip { "" } else { "; set mold.flip = true to mould the device upside down" }
                     ));
+                    // the vent must open in the ceiling, not over a wall
+                    let to_wall = (clamped.x - outline.x0)
+                        .min(outline.x1 - clamped.x)
+                        .min(clamped.y - outline.y0)
+                        .min(outline.y1 - clamped.y);
+                    if r_v >= to_wall {
+                        return Err(misfit(
+                            "vent-fits-ceiling",
+                            Some(MoldParam::VentDiameter),
+                            clamped.extend(q.z),
+                            format!(
+                                "a vent {} mm wide at the ceiling's maximum ({:.2}, {:.2}) mm would reach over the wall {to_wall:.3} mm away",
+                                p.vent_diameter, clamped.x, clamped.y
+                            ),
+                            format!("set mold.vent_diameter below {:.2} mm, or make the device larger", 2.0 * to_wall),
+                        ));
+                    }
                     Vent {
                         maximum: q,
                         place: VentPlace::Lenses,
