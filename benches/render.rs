@@ -36,8 +36,9 @@ fn main() {
         ("path", Integrator::Path),
         ("branching", Integrator::Branching(Pruning::DEFAULT)),
     ];
-    for (size, (name, integrator)) in
-        [256, 512].into_iter().flat_map(|s| integrators.map(|i| (s, i)))
+    for (size, (name, integrator)) in [256, 512]
+        .into_iter()
+        .flat_map(|s| integrators.map(|i| (s, i)))
     {
         let mut fid = (0.0, 0.0);
         let times: Vec<f64> = (0..runs)

@@ -51,6 +51,35 @@ pub struct PathEnd {
     pub leaves: Option<DVec3>,
 }
 
+/// What a ray meets at the device's surface: its reflection, its
+/// refraction (none under total internal reflection), the unpolarised
+/// Fresnel reflectance, and the side a refracted ray goes on to.
+struct Interface {
+    reflected: DVec3,
+    refracted: Option<DVec3>,
+    reflectance: f64,
+    through: Side,
+}
+
+impl Interface {
+    /// The ray `dir` meeting a surface of outward normal `normal` between
+    /// air and a medium of `index`, from either side.
+    fn meet(dir: DVec3, normal: DVec3, index: f64) -> Interface {
+        let leaving = dir.dot(normal) > 0.0;
+        let (normal, n1, n2) = if leaving {
+            (-normal, index, 1.0)
+        } else {
+            (normal, 1.0, index)
+        };
+        Interface {
+            reflected: reflect(dir, normal),
+            refracted: refract(dir, normal, n1, n2),
+            reflectance: fresnel(-dir.dot(normal), n1, n2),
+            through: if leaving { Side::Outside } else { Side::Inside },
+        }
+    }
+}
+
 /// Follows a path from `origin` along `dir` (unit) through the mesh of
 /// refractive `index` in air: at every interface it reflects with the
 /// Fresnel probability and refracts otherwise.
@@ -76,19 +105,13 @@ pub fn trace_path(
         if scene.absorbs(hit.triangle) {
             break;
         }
-        let leaving = dir.dot(hit.normal) > 0.0;
-        let (normal, n1, n2) = if leaving {
-            (-hit.normal, index, 1.0)
-        } else {
-            (hit.normal, 1.0, index)
-        };
-        let r = fresnel(-dir.dot(normal), n1, n2);
-        dir = match refract(dir, normal, n1, n2) {
-            Some(t) if rng.next_f64() >= r => {
-                side = if leaving { Side::Outside } else { Side::Inside };
+        let at = Interface::meet(dir, hit.normal, index);
+        dir = match at.refracted {
+            Some(t) if rng.next_f64() >= at.reflectance => {
+                side = at.through;
                 t
             }
-            _ => reflect(dir, normal),
+            _ => at.reflected,
         };
         origin = point;
     }
@@ -174,14 +197,7 @@ pub fn trace_branches(
             out.dropped += weight;
             continue;
         }
-        let leaving = dir.dot(hit.normal) > 0.0;
-        let (normal, n1, n2) = if leaving {
-            (-hit.normal, index, 1.0)
-        } else {
-            (hit.normal, 1.0, index)
-        };
-        let r = fresnel(-dir.dot(normal), n1, n2);
-        let refracted = refract(dir, normal, n1, n2);
+        let at = Interface::meet(dir, hit.normal, index);
         let mut branch = |d: DVec3, side: Side, w: f64| {
             if w < pruning.min_weight {
                 out.dropped += w;
@@ -189,13 +205,12 @@ pub fn trace_branches(
                 stack.push((point, d, side, w, depth + 1));
             }
         };
-        match refracted {
+        match at.refracted {
             Some(t) => {
-                branch(reflect(dir, normal), side, weight * r);
-                let through = if leaving { Side::Outside } else { Side::Inside };
-                branch(t, through, weight * (1.0 - r));
+                branch(at.reflected, side, weight * at.reflectance);
+                branch(t, at.through, weight * (1.0 - at.reflectance));
             }
-            None => branch(reflect(dir, normal), side, weight),
+            None => branch(at.reflected, side, weight),
         }
     }
     out
@@ -272,13 +287,35 @@ mod tests {
             let a = angle.to_radians();
             let dir = DVec3::new(a.sin(), 0.0, -a.cos());
             let up = |d: DVec3| DVec3::new(if d.z > 0.0 { 1.0 } else { 0.0 }, 0.0, 0.0);
-            let b = trace_branches(&scene, 1.41, DVec3::new(0.0, 0.0, 5.0), dir, &up, Pruning::NONE);
-            assert!((b.left + b.absorbed + b.dropped - 1.0).abs() < 1e-12, "{b:?}");
+            let b = trace_branches(
+                &scene,
+                1.41,
+                DVec3::new(0.0, 0.0, 5.0),
+                dir,
+                &up,
+                Pruning::NONE,
+            );
+            assert!(
+                (b.left + b.absorbed + b.dropped - 1.0).abs() < 1e-12,
+                "{b:?}"
+            );
             assert!(b.dropped < 1e-9, "{angle}°: dropped {}", b.dropped);
             assert!((b.left - 1.0).abs() < 1e-9, "{angle}°: {b:?}");
             let r = fresnel(a.cos(), 1.0, 1.41);
-            assert!((b.colour.x - 2.0 * r / (1.0 + r)).abs() < 1e-9, "{angle}°: {} vs {}", b.colour.x, 2.0 * r / (1.0 + r));
-            let pruned = trace_branches(&scene, 1.41, DVec3::new(0.0, 0.0, 5.0), dir, &up, Pruning::DEFAULT);
+            assert!(
+                (b.colour.x - 2.0 * r / (1.0 + r)).abs() < 1e-9,
+                "{angle}°: {} vs {}",
+                b.colour.x,
+                2.0 * r / (1.0 + r)
+            );
+            let pruned = trace_branches(
+                &scene,
+                1.41,
+                DVec3::new(0.0, 0.0, 5.0),
+                dir,
+                &up,
+                Pruning::DEFAULT,
+            );
             assert!((pruned.left + pruned.absorbed + pruned.dropped - 1.0).abs() < 1e-12);
             assert!(pruned.dropped < 1e-3);
         }
