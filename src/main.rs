@@ -119,7 +119,7 @@ struct ViewArgs {
     /// `path`: Monte Carlo path tracing, one Fresnel branch chosen at
     /// random per interface. `branching`: every Fresnel branch followed
     /// with its weight (no noise from the branches, only from the pixel
-    /// samples; branches under 1e-3 of a ray or past 16 interfaces dropped).
+    /// samples; report.json states the pruning and the weight dropped).
     #[arg(long, value_enum, default_value = "path")]
     integrator: IntegratorArg,
 }
