@@ -1,15 +1,20 @@
 //! Benchmark of `moirecast render` on the reference design (or SPEC):
-//! the scene (BVH) build, and then one frame of that scene at 256 × 256 and 512 × 512 with
-//! one sample per pixel, as medians over repeated runs, with each
-//! integrator (the path tracer, the default, and the branching one).
+//! the scene (BVH) build, and then one frame of that scene at 256 × 256 and
+//! 512 × 512, as medians over repeated runs: the default (the branching
+//! integrator through 16 lens phases per pixel), the same through 4, and
+//! the path tracer at one sample per pixel. The default traces the
+//! device's exact cross-sections (built once per design, like the BVH,
+//! row by row as frames need them); the others trace the mesh.
 //!
 //! `cargo bench --bench render [-- SPEC [RUNS]]`
 
 use moirecast_kernel::mesher::mesh_device;
 use moirecast_kernel::progress::Silent;
-use moirecast_render::frame::{render, Integrator, Lighting, View};
+use moirecast_render::frame::{render_traced, Integrator, Lighting, Sampling, View};
+use moirecast_render::section::Sections;
 use moirecast_render::trace::Pruning;
 use moirecast_render::Scene;
+use rayon::prelude::*;
 use std::time::Instant;
 
 mod common;
@@ -32,25 +37,54 @@ fn main() {
         .collect();
     println!("scene (BVH)       {:8.1} ms", median(scene_t) * 1e3);
     let scene = Scene::new(&dm.mesh);
+    let section_t: Vec<f64> = (0..runs)
+        .map(|_| {
+            let t = Instant::now();
+            let sections = Sections::new(design, 2 * 256 + 1).unwrap();
+            (0..sections.rows()).into_par_iter().for_each(|r| {
+                std::hint::black_box(sections.section(r));
+            });
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    println!("sections (513 rows) {:6.1} ms", median(section_t) * 1e3);
     let integrators = [
-        ("path", Integrator::Path),
-        ("branching", Integrator::Branching(Pruning::DEFAULT)),
+        (
+            "default: branching, 16 lens phases, sections",
+            Integrator::default(),
+            Sampling::default(),
+            true,
+        ),
+        (
+            "branching, 16 lens phases, mesh",
+            Integrator::Branching(Pruning::DEFAULT),
+            Sampling::default(),
+            false,
+        ),
+        (
+            "path, 1 sample, mesh",
+            Integrator::Path,
+            Sampling::Strata(1),
+            false,
+        ),
     ];
-    for (size, (name, integrator)) in [256, 512]
+    for (size, (name, integrator, sampling, by_sections)) in [256, 512]
         .into_iter()
         .flat_map(|s| integrators.map(|i| (s, i)))
     {
+        let sections = Sections::new(design, 2 * size + 1);
         let mut fid = (0.0, 0.0);
         let times: Vec<f64> = (0..runs)
             .map(|_| {
                 let t = Instant::now();
-                let f = render(
+                let f = render_traced(
                     design,
                     &scene,
+                    sections.as_ref().filter(|_| by_sections),
                     View {
                         width: size,
                         height: size,
-                        samples: 1,
+                        sampling,
                         tilt_across: 0.0,
                         tilt_along: 0.0,
                         camera: Default::default(),
@@ -65,7 +99,7 @@ fn main() {
             })
             .collect();
         println!(
-            "frame {size} x {size}  {:8.1} ms  ({name}; scene built once, above; 1 sample per pixel; fidelity {:.3}, local {:.3})",
+            "frame {size} x {size}  {:8.1} ms  ({name}; scene built once, above; fidelity {:.3}, local {:.3})",
             median(times) * 1e3,
             fid.0,
             fid.1

@@ -40,8 +40,10 @@ enum Command {
         /// Frame width and height in pixels.
         #[arg(long, default_value_t = 256)]
         size: usize,
-        /// Samples per pixel along each axis (stratified; 2 gives 4 per pixel).
-        #[arg(long, default_value_t = 2)]
+        /// Rays per pixel, N²: `branching` traces them at N² fixed lens
+        /// phases across one lens period (no noise, no seed), `path` at
+        /// N × N jittered strata of the pixel.
+        #[arg(long, default_value_t = 4)]
         samples: usize,
         /// Tilts about the lens axis, degrees, comma-separated.
         #[arg(
@@ -64,8 +66,8 @@ enum Command {
         /// Cell width and height in pixels.
         #[arg(long, default_value_t = 96)]
         size: usize,
-        /// Samples per pixel along each axis.
-        #[arg(long, default_value_t = 1)]
+        /// Rays per pixel, N², as for `render`.
+        #[arg(long, default_value_t = 2)]
         samples: usize,
         /// Tilts tried per cell (the best counts), degrees, comma-separated.
         #[arg(
@@ -113,15 +115,29 @@ struct ViewArgs {
     /// dual-lens device, one for a printed device's backlight.
     #[arg(long, default_value = "default", value_parser = moirecast::render::LightsChoice::parse)]
     lights: moirecast::render::LightsChoice,
-    /// Seed of the sample jitter: the same seed gives the same frames.
+    /// Seed of the path tracer's sample jitter and choices: the same seed
+    /// gives the same frames.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// `path`: Monte Carlo path tracing, one Fresnel branch chosen at
-    /// random per interface. `branching`: every Fresnel branch followed
-    /// with its weight (no noise from the branches, only from the pixel
-    /// samples; report.json states the pruning and the weight dropped).
-    #[arg(long, value_enum, default_value = "path")]
+    /// `branching`: every Fresnel branch followed with its weight, through
+    /// fixed lens phases: no noise, and the seed does not matter
+    /// (report.json states the pruning and the weight dropped). `path`:
+    /// Monte Carlo path tracing, one Fresnel branch chosen at random per
+    /// interface, through jittered pixel strata: the reference.
+    #[arg(long, value_enum, default_value = "branching")]
     integrator: IntegratorArg,
+    /// `sections`: the branching integrator traces a dual-lens device's
+    /// exact cross-sections where the view allows (orthographic, no
+    /// --tilt-along), a preview many times faster than the mesh. `mesh`:
+    /// the device's triangles, as printed, everywhere.
+    #[arg(long, value_enum, default_value = "sections")]
+    tracer: TracerArg,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum TracerArg {
+    Sections,
+    Mesh,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -143,6 +159,7 @@ fn view_options(
         lights,
         seed,
         integrator,
+        tracer,
     } = view;
     if let Some(d) = camera_distance.filter(|d| !d.is_finite() || *d <= 0.0) {
         anyhow::bail!("--camera-distance: {d} is not a distance in mm");
@@ -170,6 +187,10 @@ fn view_options(
                 moirecast_render::trace::Pruning::DEFAULT,
             ),
             IntegratorArg::Path => moirecast_render::frame::Integrator::Path,
+        },
+        tracer: match tracer {
+            TracerArg::Sections => moirecast::render::Tracer::Sections,
+            TracerArg::Mesh => moirecast::render::Tracer::Mesh,
         },
         seed,
     })
@@ -368,8 +389,8 @@ fn run(cli: Cli) -> Result<()> {
             bars.done();
             let done = result?;
             if !run.quiet {
-                for (tilt, f, local) in &done.fidelity {
-                    eprintln!("tilt {tilt:+6.1}°: fidelity {f:.3}, local fidelity {local:.3}");
+                for (tilt, f, local, contrast) in &done.fidelity {
+                    eprintln!("tilt {tilt:+6.1}°: fidelity {f:.3}, local fidelity {local:.3}, level-line contrast {contrast:.3}");
                 }
                 print_written(&done.written, done.bytes, started);
             }
@@ -388,7 +409,7 @@ fn run(cli: Cli) -> Result<()> {
             let done = result?;
             if !run.quiet {
                 let (a, d, f) = done.best;
-                eprintln!("best cell: a = {a}, d = {d:.4} mm, local fidelity {f:.3}");
+                eprintln!("best cell: a = {a}, d = {d:.4} mm, level-line contrast {f:.3}");
                 print_written(&done.written, done.bytes, started);
             }
         }

@@ -10,7 +10,10 @@ use moirecast_export::OutputSet;
 use moirecast_kernel::check::SolidMesh;
 use moirecast_kernel::progress::Progress;
 use moirecast_kernel::{BaseKind, Design};
-use moirecast_render::frame::{render_scored, traced_mesh, Camera, Integrator, Lighting, View};
+use moirecast_render::frame::{
+    render_scored, traced_mesh, Camera, Integrator, Lighting, Sampling, View,
+};
+use moirecast_render::section::Sections;
 use moirecast_render::sheet::{contact_sheet, to_rgb8, Rgb8};
 use moirecast_render::Scene;
 use moirecast_spec::Spec;
@@ -32,7 +35,41 @@ pub struct RenderOptions {
     pub camera_distance_mm: Option<f64>,
     pub lights: LightsChoice,
     pub integrator: Integrator,
+    /// What the branching integrator traces where it can: a dual-lens
+    /// device's exact cross-sections, or always the mesh.
+    pub tracer: Tracer,
     pub seed: u64,
+}
+
+/// What is traced (`--tracer`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Tracer {
+    /// The exact cross-sections of a dual-lens device
+    /// ([`moirecast_render::section`]), where the view allows (orthographic,
+    /// tilted about the lens axis only); the mesh elsewhere.
+    #[default]
+    Sections,
+    /// The mesh, as printed, everywhere.
+    Mesh,
+}
+
+impl Tracer {
+    /// What it is, for reports.
+    pub fn describe(&self) -> &'static str {
+        match self {
+            Tracer::Sections => "sections: a dual-lens device's exact cross-sections where the view allows (orthographic, tilted about the lens axis only), the mesh elsewhere",
+            Tracer::Mesh => "mesh: the device's triangles, as printed",
+        }
+    }
+
+    /// The sections of `design` to trace for frames of `size` pixels: a row
+    /// every half pixel or finer. `None` for the mesh tracer or a printed device.
+    pub fn sections<'d>(&self, design: &'d Design, size: usize) -> Option<Sections<'d>> {
+        match self {
+            Tracer::Sections => Sections::new(design, 2 * size + 1),
+            Tracer::Mesh => None,
+        }
+    }
 }
 
 /// The lights asked for (`--lights`); [`LightsChoice::lighting`] makes them
@@ -108,12 +145,32 @@ impl LightsChoice {
 }
 
 impl RenderOptions {
+    /// Whether the sections trace every pixel the device covers in these
+    /// frames: the branching integrator through a dual-lens device's
+    /// sections, an orthographic camera, no tilt along.
+    pub fn sections_trace_every_frame(&self) -> bool {
+        self.tracer == Tracer::Sections
+            && matches!(self.integrator, Integrator::Branching(_))
+            && self.camera_distance_mm.is_none()
+            && self.tilt_along_deg == 0.0
+    }
+
+    /// Where each pixel's rays go: `samples`² fixed lens phases for the
+    /// branching integrator, `samples` × `samples` jittered strata for the
+    /// path tracer.
+    pub fn sampling(&self) -> Sampling {
+        match self.integrator {
+            Integrator::Branching(_) => Sampling::LensPeriod(self.samples * self.samples),
+            Integrator::Path => Sampling::Strata(self.samples),
+        }
+    }
+
     /// The view at `tilt_deg` about the lens axis, in `lighting`.
     pub fn view(&self, tilt_deg: f64, lighting: Lighting) -> View {
         View {
             width: self.size,
             height: self.size,
-            samples: self.samples,
+            sampling: self.sampling(),
             tilt_across: tilt_deg.to_radians(),
             tilt_along: self.tilt_along_deg.to_radians(),
             camera: match self.camera_distance_mm {
@@ -135,6 +192,9 @@ struct FrameReport {
     /// Fidelity within windows of the frame (beside METHOD §8; see
     /// `moirecast_render::fidelity::local_fidelity`).
     local_fidelity: f64,
+    /// How strongly the frame shows the level lines, in units of the
+    /// signal's full scale (`moirecast_render::fidelity::level_line_contrast`).
+    contrast: f64,
     /// Mean Rec. 709 luminance of the frame's linear colours.
     mean_luminance: f64,
     /// Mean weight per camera ray that the branching integrator dropped
@@ -148,6 +208,7 @@ struct RenderReport {
     spec: String,
     size_px: usize,
     samples_per_pixel: usize,
+    sampling: String,
     seed: u64,
     pixels_per_period: f64,
     /// Tilt about the x axis of every frame (degrees).
@@ -156,19 +217,21 @@ struct RenderReport {
     camera: String,
     light: String,
     integrator: String,
+    tracer: &'static str,
     frames: Vec<FrameReport>,
-    /// The frame with the highest local fidelity, and its two fidelities.
+    /// The frame with the highest level-line contrast, and its scores.
     best_frame: usize,
     best_fidelity: f64,
     best_local_fidelity: f64,
+    best_contrast: f64,
 }
 
 /// What `moirecast render` wrote.
 pub struct RenderOutcome {
     pub written: Vec<PathBuf>,
     pub bytes: usize,
-    /// (tilt in degrees, fidelity, local fidelity) per frame.
-    pub fidelity: Vec<(f64, f64, f64)>,
+    /// (tilt in degrees, fidelity, local fidelity, level-line contrast) per frame.
+    pub fidelity: Vec<(f64, f64, f64, f64)>,
 }
 
 /// PNG bytes of `image`: 8-bit grey where every pixel is grey (a printed
@@ -240,11 +303,17 @@ pub fn run_render(
         );
     }
     let scene = Scene::with_absorbing(&mesh, absorbing);
+    let sections = options.tracer.sections(design, options.size);
     let mut files = OutputSet::new();
     let (mut images, mut reports) = (Vec::new(), Vec::new());
     let mut period_px = 0.0;
     for (i, &tilt) in options.tilts_deg.iter().enumerate() {
-        let (frame, fidelity) = render_scored(design, &scene, options.view(tilt, lighting));
+        let (frame, fidelity) = render_scored(
+            design,
+            &scene,
+            sections.as_ref(),
+            options.view(tilt, lighting),
+        );
         period_px = frame.period_px;
         let image = to_rgb8(frame.width, frame.height, &frame.rgb);
         let name = format!("frame-{i:02}.png");
@@ -254,6 +323,7 @@ pub fn run_render(
             tilt_deg: tilt,
             fidelity,
             local_fidelity: frame.local_fidelity(),
+            contrast: frame.level_line_contrast(),
             mean_luminance: frame.mean_luminance(),
             dropped_weight: frame.dropped_weight,
         });
@@ -269,7 +339,7 @@ pub fn run_render(
     files.add("sheet.png", png(&contact_sheet(&labelled, columns))?);
     files.add("tilt.gif", gif(&images)?);
     let best = reports.iter().enumerate().fold(0, |b, (i, r)| {
-        if r.local_fidelity > reports[b].local_fidelity {
+        if r.contrast > reports[b].contrast {
             i
         } else {
             b
@@ -277,13 +347,14 @@ pub fn run_render(
     });
     let fidelity = reports
         .iter()
-        .map(|r| (r.tilt_deg, r.fidelity, r.local_fidelity))
+        .map(|r| (r.tilt_deg, r.fidelity, r.local_fidelity, r.contrast))
         .collect();
     let report = RenderReport {
         moirecast: env!("CARGO_PKG_VERSION"),
         spec: crate::report::spec_name(spec),
         size_px: options.size,
         samples_per_pixel: options.samples * options.samples,
+        sampling: options.sampling().describe(),
         seed: options.seed,
         pixels_per_period: period_px,
         tilt_along_deg: options.tilt_along_deg,
@@ -293,9 +364,11 @@ pub fn run_render(
         },
         light: lighting.describe(),
         integrator: options.integrator.describe(),
+        tracer: options.tracer.describe(),
         best_frame: best,
         best_fidelity: reports.get(best).map_or(0.0, |r| r.fidelity),
         best_local_fidelity: reports.get(best).map_or(0.0, |r| r.local_fidelity),
+        best_contrast: reports.get(best).map_or(0.0, |r| r.contrast),
         frames: reports,
     };
     let (written, bytes) = commit_with_report(files, &report, out)?;

@@ -328,14 +328,14 @@ fn render_writes_frames_sheet_gif_and_fidelity_deterministically() {
     assert_eq!(frames.len(), 3);
     for (f, tilt) in frames.iter().zip([-5.0, 0.0, 5.0]) {
         assert_eq!(f["tilt_deg"].as_f64().unwrap(), tilt);
-        for key in ["fidelity", "local_fidelity"] {
+        for key in ["fidelity", "local_fidelity", "contrast"] {
             assert!((0.0..=1.0).contains(&f[key].as_f64().unwrap()), "{f}");
         }
     }
     let best = &frames[report["best_frame"].as_u64().unwrap() as usize];
     assert!(frames
         .iter()
-        .all(|f| f["local_fidelity"].as_f64() <= best["local_fidelity"].as_f64()));
+        .all(|f| f["contrast"].as_f64() <= best["contrast"].as_f64()));
     assert!(std::fs::read(out_a.join("frame-00.png"))
         .unwrap()
         .starts_with(b"\x89PNG"));
@@ -420,14 +420,13 @@ fn explore_scores_the_design_space_and_writes_the_best_spec() {
     let cells = report["cells"].as_array().unwrap();
     assert_eq!(cells.len(), 25);
     let best = report["best"].as_u64().unwrap() as usize;
-    let best_local = cells[best]["local_fidelity"].as_f64().unwrap();
+    let best_contrast = cells[best]["contrast"].as_f64().unwrap();
     for c in cells {
-        if let Some(local) = c["local_fidelity"].as_f64() {
-            assert!((0.0..=best_local).contains(&local), "{c}");
-            assert!(
-                (0.0..=1.0).contains(&c["fidelity"].as_f64().unwrap()),
-                "{c}"
-            );
+        if let Some(contrast) = c["contrast"].as_f64() {
+            assert!((0.0..=best_contrast).contains(&contrast), "{c}");
+            for key in ["fidelity", "local_fidelity"] {
+                assert!((0.0..=1.0).contains(&c[key].as_f64().unwrap()), "{c}");
+            }
         } else {
             assert!(c["invalid"].is_string(), "{c}");
         }

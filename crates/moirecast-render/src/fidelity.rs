@@ -40,6 +40,42 @@ pub fn local_fidelity(
     height: usize,
     period_px: f64,
 ) -> f64 {
+    let (within, total, _) = windowed_variances(values, phase, width, height, period_px);
+    r_squared(within, total)
+}
+
+/// How strongly a frame shows its level lines, in units of the signal's
+/// full scale: 2 × the standard deviation of the part of the frame that the
+/// elevation phase explains, within [`LOCAL_WINDOWS`]² windows (the
+/// between-bin variance of [`local_fidelity`], per pixel). A signal that
+/// swings between 0 and 1 in step with the level lines scores 1 (a square
+/// wave; a full sine scores 0.71); none scores 0. [`local_fidelity`] is a
+/// correlation, blind to contrast: a defocused base blurs the moiré into a
+/// smooth, faint wave that correlates as well as a sharp one. A viewer sees
+/// the contrast, so this ranks designs (`moirecast explore`).
+pub fn level_line_contrast(
+    values: &[f64],
+    phase: &[f64],
+    width: usize,
+    height: usize,
+    period_px: f64,
+) -> f64 {
+    let (within, total, seen) = windowed_variances(values, phase, width, height, period_px);
+    if seen == 0 {
+        return 0.0;
+    }
+    2.0 * ((total - within).max(0.0) / seen as f64).sqrt()
+}
+
+/// (Σ within-bin variance, Σ variance about each window's mean, pixels
+/// that see the device) over [`LOCAL_WINDOWS`]² windows, as sums of squares.
+fn windowed_variances(
+    values: &[f64],
+    phase: &[f64],
+    width: usize,
+    height: usize,
+    period_px: f64,
+) -> (f64, f64, usize) {
     let smooth = low_passed(values, phase, width, height, period_px);
     let (mut within, mut total) = (0.0, 0.0);
     for wy in 0..LOCAL_WINDOWS {
@@ -57,7 +93,8 @@ pub fn local_fidelity(
             total += t;
         }
     }
-    r_squared(within, total)
+    let seen = phase.iter().filter(|p| p.is_finite()).count();
+    (within, total, seen)
 }
 
 /// The frame low-passed over one lens period (a box one period wide along

@@ -20,7 +20,7 @@
 //! let frame = render(&design, &scene, View {
 //!     width: 32,
 //!     height: 32,
-//!     samples: 1,
+//!     sampling: Default::default(),
 //!     tilt_across: 0.0,
 //!     tilt_along: 0.0,
 //!     camera: Camera::Orthographic,
@@ -35,6 +35,7 @@ pub mod fidelity;
 pub mod frame;
 pub mod optics;
 pub mod scene;
+pub mod section;
 pub mod sheet;
 pub mod trace;
 

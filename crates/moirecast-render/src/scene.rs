@@ -260,6 +260,29 @@ impl<'m> Scene<'m> {
         }
     }
 
+    /// A scene with nothing in it that frames `bounds`: for frames traced
+    /// wholly through [`crate::section::Sections`], whose rays never need
+    /// the mesh.
+    pub fn framing(bounds: (DVec3, DVec3)) -> Scene<'static> {
+        static NOTHING: Mesh = Mesh {
+            positions: Vec::new(),
+            triangles: Vec::new(),
+        };
+        Scene {
+            mesh: &NOTHING,
+            nodes: Vec::new(),
+            primitive_indices: Vec::new(),
+            corners: Vec::new(),
+            absorbing: Vec::new(),
+            bounds,
+        }
+    }
+
+    /// Whether the scene holds no triangles (see [`Scene::framing`]).
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+
     /// The mesh's bounding box, (lowest, highest) corner.
     pub fn bounds(&self) -> (DVec3, DVec3) {
         self.bounds

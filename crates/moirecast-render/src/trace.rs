@@ -32,6 +32,35 @@ impl SplitMix64 {
     }
 }
 
+/// What a ray meets first: how far along it, the surface's outward unit
+/// normal there, and whether the surface absorbs (a printed device's bands).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Meeting {
+    pub t: f64,
+    pub normal: DVec3,
+    pub absorbs: bool,
+}
+
+/// The surfaces light is traced through: the device's mesh ([`Scene`]), or
+/// its exact cross-sections ([`crate::section::Section`]).
+pub trait Surfaces {
+    /// The nearest surface past `t_min` along `origin + t·dir` (dir unit)
+    /// that a ray on `side` can meet: from outside one it enters through,
+    /// from inside one it leaves through.
+    fn meet(&self, side: Side, origin: DVec3, dir: DVec3, t_min: f64) -> Option<Meeting>;
+}
+
+impl Surfaces for Scene<'_> {
+    fn meet(&self, side: Side, origin: DVec3, dir: DVec3, t_min: f64) -> Option<Meeting> {
+        self.intersect_from(side, origin, dir, t_min)
+            .map(|hit| Meeting {
+                t: hit.t,
+                normal: hit.normal,
+                absorbs: self.absorbs(hit.triangle),
+            })
+    }
+}
+
 /// Interfaces a path may cross before it is dropped (it then carries no light).
 pub const MAX_BOUNCES: usize = 32;
 /// How far (mm) a new segment starts past the surface it leaves.
@@ -84,7 +113,7 @@ impl Interface {
 /// refractive `index` in air: at every interface it reflects with the
 /// Fresnel probability and refracts otherwise.
 pub fn trace_path(
-    scene: &Scene,
+    scene: &(impl Surfaces + ?Sized),
     index: f64,
     mut origin: DVec3,
     mut dir: DVec3,
@@ -94,7 +123,7 @@ pub fn trace_path(
     // the path starts outside, and crosses the surface where it refracts
     let mut side = Side::Outside;
     for _ in 0..MAX_BOUNCES {
-        let Some(hit) = scene.intersect_from(side, origin, dir, EPSILON_MM) else {
+        let Some(hit) = scene.meet(side, origin, dir, EPSILON_MM) else {
             return PathEnd {
                 first,
                 leaves: Some(dir),
@@ -102,7 +131,7 @@ pub fn trace_path(
         };
         let point = origin + hit.t * dir;
         first.get_or_insert((point, hit.normal));
-        if scene.absorbs(hit.triangle) {
+        if hit.absorbs {
             break;
         }
         let at = Interface::meet(dir, hit.normal, index);
@@ -165,7 +194,7 @@ pub struct Branches {
 /// mesh sees in direction `d`, `colour_of(d)`. Before pruning, `left +
 /// absorbed = 1` up to round-off: the weights are conserved.
 pub fn trace_branches(
-    scene: &Scene,
+    scene: &(impl Surfaces + ?Sized),
     index: f64,
     origin: DVec3,
     dir: DVec3,
@@ -182,14 +211,14 @@ pub fn trace_branches(
     // (origin, direction, side, weight, interfaces crossed)
     let mut stack = vec![(origin, dir, Side::Outside, 1.0f64, 0usize)];
     while let Some((origin, dir, side, weight, depth)) = stack.pop() {
-        let Some(hit) = scene.intersect_from(side, origin, dir, EPSILON_MM) else {
+        let Some(hit) = scene.meet(side, origin, dir, EPSILON_MM) else {
             out.colour += weight * colour_of(dir);
             out.left += weight;
             continue;
         };
         let point = origin + hit.t * dir;
         out.first.get_or_insert((point, hit.normal));
-        if scene.absorbs(hit.triangle) {
+        if hit.absorbs {
             out.absorbed += weight;
             continue;
         }

@@ -1,0 +1,121 @@
+//! The default renderer (the branching integrator through fixed lens
+//! phases, tracing a dual-lens device's exact cross-sections) against the
+//! Monte Carlo path tracer through the mesh, its reference, on every
+//! shipped spec: the same picture (correlation after a 5 × 5 box blur, which
+//! averages the path tracer's noise and the lens stripes of its pixel-square
+//! filter) and the same light (mean luminance). The default's frames do not
+//! depend on the seed: no noise. And the sections agree with the mesh.
+
+use glam::DVec3;
+use moirecast_kernel::mesher::mesh_device;
+use moirecast_kernel::progress::Silent;
+use moirecast_render::frame::{
+    luminance, render_traced, traced_mesh, Camera, Frame, Integrator, Lighting, Sampling, View,
+};
+use moirecast_render::section::Sections;
+use moirecast_render::Scene;
+
+const SIZE: usize = 128;
+
+fn shipped_specs() -> Vec<std::path::PathBuf> {
+    let mut specs: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/molds"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    specs.sort();
+    assert!(specs.len() >= 4, "the shipped specs are found");
+    specs
+}
+
+/// Luminance of each pixel, box-blurred over 5 × 5 pixels (clamped at edges).
+fn blurred_luminance(f: &Frame) -> Vec<f64> {
+    let (w, h) = (f.width as i64, f.height as i64);
+    let lum: Vec<f64> = f.rgb.iter().map(|&c| luminance(c)).collect();
+    let at = |x: i64, y: i64| lum[(y.clamp(0, h - 1) * w + x.clamp(0, w - 1)) as usize];
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            (-2..=2)
+                .flat_map(|dy| (-2..=2).map(move |dx| (dx, dy)))
+                .map(|(dx, dy)| at(x + dx, y + dy))
+                .sum::<f64>()
+                / 25.0
+        })
+        .collect()
+}
+
+fn correlation(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        ab += (x - ma) * (y - mb);
+        aa += (x - ma) * (x - ma);
+        bb += (y - mb) * (y - mb);
+    }
+    ab / (aa * bb).sqrt()
+}
+
+/// σ of the difference of two frames per channel: RMS / √2.
+fn sigma_between(a: &Frame, b: &Frame) -> f64 {
+    let sq: f64 = a
+        .rgb
+        .iter()
+        .zip(&b.rgb)
+        .map(|(x, y)| (*x - *y).length_squared())
+        .sum();
+    (sq / (3.0 * a.rgb.len() as f64) / 2.0).sqrt()
+}
+
+#[test]
+fn the_default_frame_agrees_with_the_path_tracer_on_every_shipped_spec() {
+    let mut failures = Vec::new();
+    for path in shipped_specs() {
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        let spec = moirecast_spec::load(&path).unwrap();
+        let design = &spec.design;
+        let dm = mesh_device(design, &Silent).unwrap();
+        let (mesh, absorbing) = traced_mesh(design, &dm).unwrap();
+        let scene = Scene::with_absorbing(&mesh, absorbing);
+        let sections = Sections::new(design, 2 * SIZE + 1);
+        let frame = |integrator, sampling, seed, sections| {
+            let view = View {
+                width: SIZE,
+                height: SIZE,
+                sampling,
+                tilt_across: 2.5f64.to_radians(),
+                tilt_along: 0.0,
+                camera: Camera::Orthographic,
+                lighting: Lighting::default_for(design),
+                integrator,
+                seed,
+            };
+            render_traced(design, &scene, sections, view)
+        };
+        let (branching, lens) = (Integrator::default(), Sampling::default());
+        let ours = frame(branching, lens, 1, sections.as_ref());
+        let other_seed = frame(branching, lens, 2, sections.as_ref());
+        let by_mesh = frame(branching, lens, 1, None);
+        let reference = frame(Integrator::Path, Sampling::Strata(6), 1, None);
+        let corr = correlation(&blurred_luminance(&ours), &blurred_luminance(&reference));
+        let lum = ours.mean_luminance() - reference.mean_luminance();
+        let sigma = sigma_between(&ours, &other_seed);
+        let mesh_corr = correlation(&blurred_luminance(&ours), &blurred_luminance(&by_mesh));
+        eprintln!(
+            "{name}: correlation {corr:.4}, mean luminance {:.5} vs path {:.5} ({lum:+.5}), σ between seeds {sigma}, dropped {:.5}; by the mesh: correlation {mesh_corr:.4}, mean luminance {:.5}",
+            ours.mean_luminance(),
+            reference.mean_luminance(),
+            ours.dropped_weight,
+            by_mesh.mean_luminance(),
+        );
+        if corr < 0.98 || lum.abs() > 0.005 || sigma > 0.005 || mesh_corr < 0.98 {
+            failures.push(name.clone());
+        }
+        assert!(ours
+            .rgb
+            .iter()
+            .all(|c| c.is_finite() && c.cmpge(DVec3::ZERO).all()));
+    }
+    assert!(failures.is_empty(), "{failures:?}");
+}
