@@ -6,8 +6,10 @@ and light (METHOD §8), then the comparison. Run by scripts/blender-compare.sh:
 PLUS_X and MINUS_X are the lateral lights' linear colours as r,g,b (default
 1,1,1 and 0,0,0: moirecast's `--lights white`).
 
-OUT holds device/device.stl and ours-<spp>-<seed>/frame-00.png with their
-logs; this writes cycles-<seed>.png and prints the comparison as JSON.
+OUT holds device/device.stl, ours-<spp>-<seed>/frame-00.png (the path
+tracer) and default-<seed>/frame-00.png (the default integrator) with their
+logs; this writes cycles-<seed>.png (and cycles-quarter.png, at a quarter
+of the samples, for the time per sample) and prints the comparison as JSON.
 """
 import json
 import math
@@ -121,13 +123,17 @@ scene.render.image_settings.color_depth = "16"
 scene.display_settings.display_device = "None"  # linear values, as moirecast writes
 scene.view_settings.view_transform = "Standard"
 
-times = []
-for seed in (1, 2):
+def render_cycles(name, seed, spp):
     scene.cycles.seed = seed
-    scene.render.filepath = str(out / f"cycles-{seed}.png")
+    scene.cycles.samples = spp
+    scene.render.filepath = str(out / name)
     t = time.perf_counter()
     bpy.ops.render.render(write_still=True)
-    times.append(time.perf_counter() - t)
+    return time.perf_counter() - t
+
+
+times = [render_cycles(f"cycles-{seed}.png", seed, samples) for seed in (1, 2)]
+quarter_ms = 1e3 * render_cycles("cycles-quarter.png", 3, max(1, samples // 4))
 
 
 def rgb(path):
@@ -161,14 +167,18 @@ def luminance(planes):
     return float(np.tensordot([0.2126, 0.7152, 0.0722], planes, 1).mean())
 
 
+def rendering_ms(log):
+    """The time of the `rendering` stage in a `moirecast render -v` log."""
+    return [float(l.split()[-2]) for l in log.read_text().splitlines() if l.strip().startswith("rendering")][0]
+
+
 cycles = [rgb(out / f"cycles-{s}.png") for s in (1, 2)]
 ours = {}
 for d in sorted(out.glob("ours-*-1")):
     spp = int(d.name.split("-")[1])
     a, b = rgb(d / "frame-00.png"), rgb(out / f"ours-{spp}-2" / "frame-00.png")
-    ms = [float(l.split()[-2]) for l in (d.parent / f"ours-{spp}-1.log").read_text().splitlines() if l.strip().startswith("rendering")]
     report = json.loads((d / "report.json").read_text())
-    ours[spp] = dict(noise=noise(a, b), ms=ms[0], mean=(a + b) / 2, period_px=report["pixels_per_period"])
+    ours[spp] = dict(noise=noise(a, b), ms=rendering_ms(d.parent / f"ours-{spp}-1.log"), mean=(a + b) / 2, period_px=report["pixels_per_period"])
 c_noise, c_ms = noise(*cycles), 1e3 * min(times)
 c_mean = (cycles[0] + cycles[1]) / 2
 best = max(ours)
@@ -179,21 +189,41 @@ spps = sorted(ours)
 per_sample, fixed = np.polyfit([s * s for s in spps], [ours[s]["ms"] for s in spps], 1)
 samples_eq = spps[-1] ** 2 * (ours[spps[-1]]["noise"] / c_noise) ** 2
 ours_eq_ms = fixed + per_sample * samples_eq
+# the default: no noise; Cycles' time to σ = 0.005, from its time per sample
+# (two sample counts) and noise falling as 1/sqrt(samples)
+TARGET_NOISE = 0.005
+d1, d2 = rgb(out / "default-1" / "frame-00.png"), rgb(out / "default-2" / "frame-00.png")
+default_ms = rendering_ms(out / "default-1.log")
+c_per_sample = (c_ms - quarter_ms) / (samples - max(1, samples // 4))
+c_fixed = c_ms - c_per_sample * samples
+c_samples_at_target = samples * (c_noise / TARGET_NOISE) ** 2
+c_ms_at_target = c_fixed + c_per_sample * c_samples_at_target
+default = dict(
+    ms=default_ms,
+    noise=noise(d1, d2),
+    cycles_samples_at_noise_0005=c_samples_at_target,
+    cycles_ms_at_noise_0005=c_ms_at_target,
+    time_ratio_cycles_over_ours=c_ms_at_target / default_ms,
+    correlation=float(np.corrcoef(c_mean.ravel(), d1.ravel())[0, 1]),
+    correlation_one_period=float(np.corrcoef(box(c_mean, period).ravel(), box(d1, period).ravel())[0, 1]),
+    mean_luminance=luminance(d1),
+)
 result = dict(
     size=size,
     tilt_deg=tilt,
     cycles_samples=samples,
     cycles_ms=c_ms,
     cycles_noise=c_noise,
-    ours={f"{s * s} spp": dict(ms=o["ms"], noise=o["noise"]) for s, o in sorted(ours.items())},
-    ours_fixed_ms=float(fixed),
-    ours_ms_per_sample_per_pixel=float(per_sample),
-    ours_samples_at_cycles_noise=samples_eq,
-    ours_ms_at_cycles_noise=float(ours_eq_ms),
+    path={f"{s * s} spp": dict(ms=o["ms"], noise=o["noise"]) for s, o in sorted(ours.items())},
+    path_fixed_ms=float(fixed),
+    path_ms_per_sample_per_pixel=float(per_sample),
+    path_samples_at_cycles_noise=samples_eq,
+    path_ms_at_cycles_noise=float(ours_eq_ms),
     time_ratio_cycles_over_ours=c_ms / ours_eq_ms,
     correlation=float(np.corrcoef(c_mean.ravel(), ours[best]["mean"].ravel())[0, 1]),
     correlation_one_period=float(np.corrcoef(box(c_mean, period).ravel(), box(ours[best]["mean"], period).ravel())[0, 1]),
     mean_luminance=dict(cycles=luminance(c_mean), ours=luminance(ours[best]["mean"])),
     lights=dict(plus_x=plus_x, minus_x=minus_x),
+    default=default,
 )
 print("COMPARISON " + json.dumps(result))

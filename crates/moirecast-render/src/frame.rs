@@ -405,7 +405,7 @@ type RaySample = (DVec3, Option<(DVec3, DVec3)>, f64);
 /// Lenses next to each wall whose pixels [`lattice_pixels`] leaves to the
 /// mesh: sections have no walls, and a ray through the outermost lenses
 /// can meet one.
-const WALL_LENSES: i64 = 2;
+const WALL_LENSES: i64 = 1;
 
 /// The pixels a [`Sections`] lattice colours: per pixel its colour, phase
 /// and dropped weight, or `None` where the mesh must be traced (pixels that

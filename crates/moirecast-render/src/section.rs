@@ -176,42 +176,79 @@ impl ArcRow {
             }
         };
         let mut best: Option<(f64, DVec2)> = None;
-        let order: Box<dyn Iterator<Item = usize>> = if forward {
-            let first = self.blocks.partition_point(|b| b.0 .1 < x0);
-            Box::new(first..self.blocks.len())
+        let arcs = &self.arcs;
+        // arcs in the order the ray passes them, from the first it can
+        // meet; a block the ray passes above or below is skipped whole
+        let n = arcs.len();
+        let (mut j, stop) = if forward {
+            (self.first_reaching(x0), n)
         } else {
-            let end = self.blocks.partition_point(|b| b.0 .0 <= x1);
-            Box::new((0..end).rev())
+            (n - self.first_beyond(x1), n)
         };
-        for b in order {
-            let block = self.blocks[b];
-            if past(block.0, &best) {
-                break;
-            }
-            if misses(block) {
+        // j counts arcs passed; the arc is `at(j)`
+        let at = |j: usize| if forward { j } else { n - 1 - j };
+        while j < stop {
+            let i = at(j);
+            let entering_block = if forward {
+                i % BLOCK == 0
+            } else {
+                i % BLOCK == BLOCK - 1 || i == n - 1
+            };
+            if entering_block && misses(self.blocks[i / BLOCK]) {
+                // to the first arc of the next block in the direction of travel
+                j += if forward { BLOCK } else { i % BLOCK + 1 };
                 continue;
             }
-            let arcs = &self.arcs[b * BLOCK..((b + 1) * BLOCK).min(self.arcs.len())];
-            let mut visit = |arc: &Arc2| {
-                if past(arc.x, &best) {
-                    return false;
-                }
-                if !misses((arc.x, arc.z)) {
-                    if let Some(hit) = arc.meet(o, d, t_min, side) {
-                        if best.is_none_or(|b| hit.0 < b.0) {
-                            best = Some(hit);
-                        }
+            let arc = &arcs[i];
+            if past(arc.x, &best) {
+                break;
+            }
+            if !misses((arc.x, arc.z)) {
+                if let Some(hit) = arc.meet(o, d, t_min, side) {
+                    if best.is_none_or(|b| hit.0 < b.0) {
+                        best = Some(hit);
                     }
                 }
-                true
-            };
-            if forward {
-                arcs.iter().take_while(|a| visit(a)).for_each(drop);
-            } else {
-                arcs.iter().rev().take_while(|a| visit(a)).for_each(drop);
             }
+            j += 1;
         }
         best
+    }
+
+    /// The index of an arc near x: the arcs are about equally wide.
+    fn guess(&self, x: f64) -> usize {
+        let (first, last) = match (self.arcs.first(), self.arcs.last()) {
+            (Some(a), Some(b)) if b.x.1 > a.x.0 => (a.x.0, b.x.1),
+            _ => return 0,
+        };
+        let n = self.arcs.len();
+        (((x - first) / (last - first) * n as f64).max(0.0) as usize).min(n - 1)
+    }
+
+    /// The first arc whose x extent reaches x (ends at or past it), or n.
+    fn first_reaching(&self, x: f64) -> usize {
+        let arcs = &self.arcs;
+        let mut i = self.guess(x);
+        while i > 0 && arcs[i - 1].x.1 >= x {
+            i -= 1;
+        }
+        while i < arcs.len() && arcs[i].x.1 < x {
+            i += 1;
+        }
+        i
+    }
+
+    /// The first arc that starts beyond x, or n.
+    fn first_beyond(&self, x: f64) -> usize {
+        let arcs = &self.arcs;
+        let mut i = self.guess(x);
+        while i > 0 && arcs[i - 1].x.0 > x {
+            i -= 1;
+        }
+        while i < arcs.len() && arcs[i].x.0 <= x {
+            i += 1;
+        }
+        i
     }
 
     fn z_extent(&self) -> (f64, f64) {
