@@ -4,6 +4,7 @@
 
 use super::base::BaseRow;
 use super::zip::{zip, Strip};
+use crate::check::{triangle_altitude, MIN_ALTITUDE_MM};
 use crate::device_mesh::{DeviceMesh, Patch, Side};
 use glam::DVec3;
 
@@ -84,10 +85,14 @@ pub(super) fn strips(dm: &DeviceMesh, base_rows: &[BaseRow], base_offsets: &[u32
     (tris, patches)
 }
 
-/// Where the x-walls fold: for every triangle of the left or right wall
-/// whose normal points into the device, the height y of its edge on the
-/// base. A revealer row there gives the sparse top edge a vertex near the
-/// wavy bottom one, so the zip can take only triangles that face out.
+/// Where the x-walls fold or fan into slivers: for every triangle of the
+/// left or right wall whose normal points into the device, or that is
+/// thinner than the degenerate-triangle check allows, the height y of its
+/// edge on the base. A revealer row there gives the sparse top edge a
+/// vertex near the wavy bottom one, so the zip can take only triangles
+/// that face out, and fan two bottom vertices a few tens of nanometres
+/// apart (a crease grazing the wall) from a vertex above them rather than
+/// from one millimetres away (found-9e054658bb6abd84: 8.7 nm).
 pub(super) fn folds(dm: &DeviceMesh, (tris, patches): &Strip) -> Vec<f64> {
     let pos = &dm.mesh.positions;
     let top = |v: u32| dm.origins[v as usize].is_revealer();
@@ -98,8 +103,10 @@ pub(super) fn folds(dm: &DeviceMesh, (tris, patches): &Strip) -> Vec<f64> {
             Patch::Wall(Side::Right) => DVec3::X,
             _ => continue,
         };
-        let [a, b, c] = t.map(|v| pos[v as usize]);
-        if (b - a).cross(c - a).dot(outward) > 0.0 {
+        let corners = t.map(|v| pos[v as usize]);
+        let [a, b, c] = corners;
+        let faces_out = (b - a).cross(c - a).dot(outward) > 0.0;
+        if faces_out && triangle_altitude(corners) >= MIN_ALTITUDE_MM {
             continue;
         }
         let bottom: Vec<f64> = t
