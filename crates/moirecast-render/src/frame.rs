@@ -407,6 +407,12 @@ type RaySample = (DVec3, Option<(DVec3, DVec3)>, f64);
 /// can meet one.
 const WALL_LENSES: i64 = 1;
 
+/// Of each lens's rows, every this many is traced; see [`lattice_pixels`].
+const ROW_STRIDE: usize = 4;
+/// Two traced rows whose colours differ by no more than this in any
+/// channel have the rows between them interpolated, not traced.
+const ROW_AGREEMENT: f64 = 0.02;
+
 /// The pixels a [`Sections`] lattice colours: per pixel its colour, phase
 /// and dropped weight, or `None` where the mesh must be traced (pixels that
 /// see no layout point, or whose section could not be built).
@@ -455,23 +461,74 @@ fn lattice_pixels(
         needed[cell(r, i)] = true;
         needed[cell(r, i + 1)] = true;
     }
-    let cells: Vec<Option<(DVec3, f64)>> = needed
-        .par_iter()
-        .enumerate()
-        .map(|(c, &need)| {
-            let (r, i) = (c / columns, (c % columns) as i64);
-            let section = sections.section(r).filter(|_| need)?;
-            let v = sections.station(r);
-            let (mut colour, mut dropped) = (DVec3::ZERO, 0.0);
-            for j in 0..phases {
-                let u = design.crease_u(i) + (j as f64 + 0.5) / phases as f64 * t;
-                let ray = shot.ray_through(design.surface().point(u, v));
-                let (c, d) = trace(ray, section);
-                (colour, dropped) = (colour + c, dropped + d);
-            }
-            Some((colour / phases as f64, dropped / phases as f64))
+    let trace_cell = |r: usize, i: i64| {
+        let section = sections.section(r)?;
+        let v = sections.station(r);
+        let (mut colour, mut dropped) = (DVec3::ZERO, 0.0);
+        for j in 0..phases {
+            let u = design.crease_u(i) + (j as f64 + 0.5) / phases as f64 * t;
+            let ray = shot.ray_through(design.surface().point(u, v));
+            let (c, d) = trace(ray, section);
+            (colour, dropped) = (colour + c, dropped + d);
+        }
+        Some((colour / phases as f64, dropped / phases as f64))
+    };
+    // Each lens's needed rows: every ROW_STRIDE-th (and the last) traced;
+    // the rows between interpolated along v where the two traced ones agree
+    // within ROW_AGREEMENT, traced where they do not (a level line between).
+    let rows_of: Vec<Vec<usize>> = (0..columns)
+        .map(|i| {
+            (0..sections.rows())
+                .filter(|&r| needed[r * columns + i])
+                .collect()
         })
         .collect();
+    let coarse = |k: usize, n: usize| k % ROW_STRIDE == 0 || k + 1 == n;
+    let mut cells: Vec<Option<(DVec3, f64)>> = vec![None; needed.len()];
+    let first: Vec<(usize, Option<(DVec3, f64)>)> = rows_of
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(i, rows)| {
+            let n = rows.len();
+            rows.iter()
+                .enumerate()
+                .filter(move |&(k, _)| coarse(k, n))
+                .map(move |(_, &r)| (cell(r, i as i64), trace_cell(r, i as i64)))
+        })
+        .collect();
+    for (c, value) in first {
+        cells[c] = value;
+    }
+    let between: Vec<(usize, Option<(DVec3, f64)>)> = rows_of
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(i, rows)| {
+            let (n, cells) = (rows.len(), &cells);
+            let i = i as i64;
+            rows.iter()
+                .enumerate()
+                .filter(move |&(k, _)| !coarse(k, n))
+                .map(move |(k, &r)| {
+                    let (ra, rb) = (
+                        rows[k - k % ROW_STRIDE],
+                        rows[(k - k % ROW_STRIDE + ROW_STRIDE).min(n - 1)],
+                    );
+                    let value = match (cells[cell(ra, i)], cells[cell(rb, i)]) {
+                        (Some((ca, da)), Some((cb, db)))
+                            if (ca - cb).abs().max_element() <= ROW_AGREEMENT =>
+                        {
+                            let w = (r - ra) as f64 / (rb - ra) as f64;
+                            Some((ca.lerp(cb, w), da + w * (db - da)))
+                        }
+                        _ => trace_cell(r, i),
+                    };
+                    (cell(r, i), value)
+                })
+        })
+        .collect();
+    for (c, value) in between {
+        cells[c] = value;
+    }
     let levels = design.params.base.levels;
     seen.into_iter()
         .map(|s| {
