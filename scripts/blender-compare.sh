@@ -13,8 +13,9 @@
 # Both of our integrators: the path tracer (`--integrator path`, 4, 16 and
 # 64 spp), whose time at Cycles' noise is fitted; and the default (the
 # branching integrator through fixed lens phases), which has no noise, so
-# Cycles' time to reach σ = 0.005 (the preview's noise bound, fitted from
-# two sample counts) is set against its time.
+# Cycles' time to reach σ = 0.005 (the preview's noise bound: Cycles is
+# rendered again at the samples its noise says that takes) is set against
+# its time.
 #
 # Prints JSON: times, noise (σ of two seeds' difference / √2), the equal-noise
 # time ratios, and the images' correlation (raw, and over one lens period).
