@@ -434,7 +434,8 @@ fn lattice_pixels(
 ) -> Vec<Option<(DVec3, f64, f64)>> {
     let (t, hw) = (design.params.period, design.params.width / 2.0);
     let lenses = design.lenses as i64;
-    let columns = lenses.max(0) as usize;
+    // lenses −1 ..= N: one beyond each wall, seen past the device's edge
+    let columns = lenses.max(0) as usize + 2;
     // per pixel: (row, lens below, weight of the lens above, u, v)
     let seen: Vec<Option<(usize, i64, f64, f64, f64)>> = (0..shot.width * shot.height)
         .into_par_iter()
@@ -445,17 +446,18 @@ fn lattice_pixels(
             let (u, v) = layout_on_ray(design, origin, d, (target.x, target.y))?;
             let r = sections.row_near(v)?;
             let s = (u + hw) / t - 0.5;
-            let (i, w) = match s.floor() as i64 {
-                // no mesh for the outermost half lens: the last centre's colour
-                i if wall_lenses == 0 && i == -1 && s >= -1.0 => (0, 0.0),
-                i if wall_lenses == 0 && i == lenses - 1 && s <= lenses as f64 => (i - 1, 1.0),
-                i => (i, s - i as f64),
+            let (i, w) = (s.floor() as i64, s - s.floor());
+            // with no lenses left to the mesh, the lenses beyond the walls
+            // are traced too (their rays meet a wall, or miss the device)
+            let (first, last) = match wall_lenses {
+                0 => (-1, lenses),
+                n => (n, lenses - 1 - n),
             };
-            let clear_of_walls = i >= wall_lenses && i + 1 < lenses - wall_lenses;
+            let clear_of_walls = i >= first && i + 1 <= last;
             (clear_of_walls && sections.section(r).is_some()).then_some((r, i, w, u, v))
         })
         .collect();
-    let cell = |r: usize, i: i64| r * columns + i as usize;
+    let cell = |r: usize, i: i64| r * columns + (i + 1) as usize;
     let mut needed = vec![false; sections.rows() * columns];
     for &(r, i, ..) in seen.iter().flatten() {
         needed[cell(r, i)] = true;
@@ -467,7 +469,11 @@ fn lattice_pixels(
         let (mut colour, mut dropped) = (DVec3::ZERO, 0.0);
         for j in 0..phases {
             let u = design.crease_u(i) + (j as f64 + 0.5) / phases as f64 * t;
-            let ray = shot.ray_through(design.surface().point(u, v));
+            let point = design.surface().point(u, v);
+            if !point.is_finite() {
+                return None; // beyond a sphere's rim
+            }
+            let ray = shot.ray_through(point);
             let (c, d) = trace(ray, section);
             (colour, dropped) = (colour + c, dropped + d);
         }
@@ -493,7 +499,7 @@ fn lattice_pixels(
             rows.iter()
                 .enumerate()
                 .filter(move |&(k, _)| coarse(k, n))
-                .map(move |(_, &r)| (cell(r, i as i64), trace_cell(r, i as i64)))
+                .map(move |(_, &r)| (cell(r, i as i64 - 1), trace_cell(r, i as i64 - 1)))
         })
         .collect();
     for (c, value) in first {
@@ -504,7 +510,7 @@ fn lattice_pixels(
         .enumerate()
         .flat_map_iter(|(i, rows)| {
             let (n, cells) = (rows.len(), &cells);
-            let i = i as i64;
+            let i = i as i64 - 1;
             rows.iter()
                 .enumerate()
                 .filter(move |&(k, _)| !coarse(k, n))

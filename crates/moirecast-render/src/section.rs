@@ -10,12 +10,12 @@
 //! in closed form: a quadratic per arc, a handful of arcs per ray, against a
 //! BVH walk over half a million triangles for the mesh.
 //!
-//! What it leaves out, and why a preview may: the surface's slope along v
-//! (an arc's bulge is projected into the plane; on the reference saddle
-//! the slope is at most 0.15, which changes a sag by about 1 %), and the
-//! walls (a ray that reaches a wall leaves through it unrefracted; only
-//! the outermost lenses see a wall). The mesh tracer traces what is
-//! printed; tests/render_agreement.rs holds the two to the same picture.
+//! The walls are vertical segments from the base to the revealer's end
+//! crease, as the mesh's x-walls are planes. What it leaves out, and why a
+//! preview may: the surface's slope along v (an arc's bulge is projected
+//! into the plane; on the reference saddle the slope is at most 0.15, which
+//! changes a sag by about 1 %). The mesh tracer traces what is printed;
+//! tests/render_agreement.rs holds the two to the same picture.
 
 use crate::scene::Side;
 use crate::trace::{Meeting, Surfaces};
@@ -75,6 +75,15 @@ impl Arc2 {
             x: extent(DVec2::X),
             z: extent(DVec2::Y),
         }
+    }
+
+    /// The z of the arc's point at x, if the arc reaches x.
+    fn z_at(&self, x: f64) -> Option<f64> {
+        let dx = x - self.centre.x;
+        let h = (self.radius * self.radius - dx * dx).sqrt();
+        [self.centre.y - h, self.centre.y + h]
+            .into_iter()
+            .find(|&z| (DVec2::new(x, z) - self.centre).dot(self.middle) >= self.on_arc)
     }
 
     /// The nearest t > `t_min` at which `o + t·d` meets the arc from
@@ -264,6 +273,9 @@ pub struct Section {
     base: ArcRow,
     /// x of the walls: a meeting beyond them is not on the device.
     walls: (f64, f64),
+    /// Each wall's z extent, from the base to the revealer's crease there:
+    /// the wall itself, a vertical segment (the mesh's x-walls are planes).
+    wall_z: [(f64, f64); 2],
     /// The section's z extent: a ray outside it meets nothing.
     z: (f64, f64),
 }
@@ -311,8 +323,19 @@ impl Section {
         let (top, base) = (ArcRow::new(top), ArcRow::new(base));
         let x_of = |u: f64| design.surface().point(u, v).x;
         let (t, b) = (top.z_extent(), base.z_extent());
+        // a wall runs from the base arc under it up to the revealer's crease
+        let wall_z = |u: f64| {
+            let (x, top_z) = (x_of(u), design.surface().point(u, v).z);
+            let bottom = base
+                .arcs
+                .iter()
+                .find_map(|a| a.z_at(x))
+                .unwrap_or_else(|| design.base_surface(u, v).z);
+            (bottom.min(top_z), bottom.max(top_z))
+        };
         Ok(Section {
             walls: (x_of(-hw), x_of(hw)),
+            wall_z: [wall_z(-hw), wall_z(hw)],
             z: (t.0.min(b.0), t.1.max(b.1)),
             top,
             base,
@@ -350,19 +373,35 @@ impl Surfaces for Section {
         t1 = t1.max(t0);
         let (xa, xb) = (x_at(t0), x_at(t1));
         let range = (xa.min(xb).max(self.walls.0), xa.max(xb).min(self.walls.1));
-        if range.0 > range.1 {
-            return None;
-        }
+        let range = if range.0 > range.1 {
+            (range.0, range.0)
+        } else {
+            range
+        };
         let within = |hit: &(f64, DVec2)| {
             let x = o.x + hit.0 * d.x;
             x >= self.walls.0 && x <= self.walls.1
         };
         let top = self.top.meet((o, d), t_min, side, range).filter(within);
         let base = self.base.meet((o, d), t_min, side, range).filter(within);
-        let nearest = match (top, base) {
-            (Some(a), Some(b)) => Some(if a.0 <= b.0 { a } else { b }),
-            (a, b) => a.or(b),
-        };
+        // the walls: entered from outside, left from inside
+        let walls = [(self.walls.0, -1.0), (self.walls.1, 1.0)]
+            .into_iter()
+            .zip(self.wall_z)
+            .filter_map(|((x, outward), (z0, z1))| {
+                let t = (x - o.x) / d.x;
+                let z = o.y + t * d.y;
+                let facing = match side {
+                    Side::Outside => d.x * outward < 0.0,
+                    Side::Inside => d.x * outward > 0.0,
+                };
+                (t > t_min && facing && z >= z0 && z <= z1).then_some((t, DVec2::new(outward, 0.0)))
+            });
+        let nearest = [top, base]
+            .into_iter()
+            .flatten()
+            .chain(walls)
+            .min_by(|a, b| a.0.total_cmp(&b.0));
         nearest.map(|(t, n)| Meeting {
             t,
             normal: DVec3::new(n.x, 0.0, n.y),
@@ -482,6 +521,15 @@ mod tests {
         // and beyond the walls there is nothing to meet
         let beside = DVec3::new(d.params.width, 0.3, 10.0);
         assert!(s.meet(Side::Outside, beside, down, 0.0).is_none());
+        // a ray inside, across the device, leaves through the wall
+        let across = DVec3::new(0.1, 0.3, inside.z - 0.5 * out.t);
+        let wall = s.meet(Side::Inside, across, DVec3::NEG_X, 0.0).unwrap();
+        assert!((across.x - wall.t + d.params.width / 2.0).abs() < 1e-12);
+        assert_eq!(wall.normal, DVec3::NEG_X);
+        // and from outside it enters through it
+        let from = DVec3::new(-d.params.width, 0.3, across.z);
+        let enters = s.meet(Side::Outside, from, DVec3::X, 0.0).unwrap();
+        assert!((enters.t - d.params.width / 2.0).abs() < 1e-12);
     }
 
     /// Through a section, as through the mesh, the branches conserve the
