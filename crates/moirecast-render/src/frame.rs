@@ -407,10 +407,13 @@ type RaySample = (DVec3, Option<(DVec3, DVec3)>, f64);
 /// can meet one.
 const WALL_LENSES: i64 = 1;
 
-/// Of each lens's rows, every this many is traced; see [`lattice_pixels`].
+/// Of each lens's rows, and of the lenses on those rows, every this many
+/// is traced first; see [`lattice_pixels`].
 const ROW_STRIDE: usize = 4;
-/// Two traced rows whose colours differ by no more than this in any
-/// channel have the rows between them interpolated, not traced.
+/// Two traced cells whose colours differ by no more than this in any
+/// channel have the cells between them interpolated, not traced. At 0.04
+/// the 256 px frame takes 199 ms instead of 262, but the plane's agreement
+/// with the path tracer falls to 0.9801 (0.06: 0.9791).
 const ROW_AGREEMENT: f64 = 0.02;
 
 /// The pixels a [`Sections`] lattice colours: per pixel its colour, phase
@@ -490,20 +493,45 @@ fn lattice_pixels(
         })
         .collect();
     let coarse = |k: usize, n: usize| k % ROW_STRIDE == 0 || k + 1 == n;
+    // the value a fraction w from a to b, if a and b agree
+    let agreeing = |(ca, da): (DVec3, f64), (cb, db): (DVec3, f64), w: f64| {
+        ((ca - cb).abs().max_element() <= ROW_AGREEMENT)
+            .then(|| (ca.lerp(cb, w), da + w * (db - da)))
+    };
     let mut cells: Vec<Option<(DVec3, f64)>> = vec![None; needed.len()];
-    let first: Vec<(usize, Option<(DVec3, f64)>)> = rows_of
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(i, rows)| {
-            let n = rows.len();
-            rows.iter()
-                .enumerate()
-                .filter(move |&(k, _)| coarse(k, n))
-                .map(move |(_, &r)| (cell(r, i as i64 - 1), trace_cell(r, i as i64 - 1)))
-        })
-        .collect();
-    for (c, value) in first {
-        cells[c] = value;
+    // on those rows, every ROW_STRIDE-th lens is traced first, and the
+    // lenses between interpolated across u where those two agree
+    let lens_coarse = |c: usize| c % ROW_STRIDE == 0 || c + 1 == columns;
+    for coarse_lens in [true, false] {
+        let done: Vec<(usize, Option<(DVec3, f64)>)> = rows_of
+            .par_iter()
+            .enumerate()
+            .filter(|&(c, _)| lens_coarse(c) == coarse_lens)
+            .flat_map_iter(|(c, rows)| {
+                let (n, cells) = (rows.len(), &cells);
+                let i = c as i64 - 1;
+                rows.iter()
+                    .enumerate()
+                    .filter(move |&(k, _)| coarse(k, n))
+                    .map(move |(_, &r)| {
+                        let (ia, ib) = (
+                            i - (c % ROW_STRIDE) as i64,
+                            (i - (c % ROW_STRIDE) as i64 + ROW_STRIDE as i64)
+                                .min(columns as i64 - 2),
+                        );
+                        let value = match (coarse_lens, cells[cell(r, ia)], cells[cell(r, ib)]) {
+                            (false, Some(a), Some(b)) => {
+                                agreeing(a, b, (i - ia) as f64 / (ib - ia) as f64)
+                            }
+                            _ => None,
+                        };
+                        (cell(r, i), value.or_else(|| trace_cell(r, i)))
+                    })
+            })
+            .collect();
+        for (c, value) in done {
+            cells[c] = value;
+        }
     }
     let between: Vec<(usize, Option<(DVec3, f64)>)> = rows_of
         .par_iter()
@@ -520,14 +548,10 @@ fn lattice_pixels(
                         rows[(k - k % ROW_STRIDE + ROW_STRIDE).min(n - 1)],
                     );
                     let value = match (cells[cell(ra, i)], cells[cell(rb, i)]) {
-                        (Some((ca, da)), Some((cb, db)))
-                            if (ca - cb).abs().max_element() <= ROW_AGREEMENT =>
-                        {
-                            let w = (r - ra) as f64 / (rb - ra) as f64;
-                            Some((ca.lerp(cb, w), da + w * (db - da)))
-                        }
-                        _ => trace_cell(r, i),
+                        (Some(a), Some(b)) => agreeing(a, b, (r - ra) as f64 / (rb - ra) as f64),
+                        _ => None,
                     };
+                    let value = value.or_else(|| trace_cell(r, i));
                     (cell(r, i), value)
                 })
         })
