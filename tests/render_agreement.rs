@@ -97,7 +97,7 @@ fn the_default_frame_agrees_with_the_path_tracer_on_every_shipped_spec() {
         let ours = frame(branching, lens, 1, sections.as_ref());
         let other_seed = frame(branching, lens, 2, sections.as_ref());
         let by_mesh = frame(branching, lens, 1, None);
-        let reference = frame(Integrator::Path, Sampling::Strata(6), 1, None);
+        let reference = frame(Integrator::Path, Sampling::Strata(10), 1, None);
         let corr = correlation(&blurred_luminance(&ours), &blurred_luminance(&reference));
         let lum = ours.mean_luminance() - reference.mean_luminance();
         let sigma = sigma_between(&ours, &other_seed);
