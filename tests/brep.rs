@@ -9,16 +9,8 @@ use moirecast_kernel::model::BaseSection;
 use moirecast_kernel::progress::Silent;
 use truck_modeling::ShellCondition;
 
-fn shipped_specs() -> Vec<std::path::PathBuf> {
-    let mut specs: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/molds"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    specs.sort();
-    assert!(specs.len() >= 4, "the shipped specs are found");
-    specs
-}
+mod common;
+use common::shipped_specs;
 
 #[test]
 fn every_shipped_device_is_a_closed_brep_that_round_trips_through_step() {

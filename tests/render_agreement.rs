@@ -17,16 +17,8 @@ use moirecast_render::Scene;
 
 const SIZE: usize = 128;
 
-fn shipped_specs() -> Vec<std::path::PathBuf> {
-    let mut specs: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/molds"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    specs.sort();
-    assert!(specs.len() >= 4, "the shipped specs are found");
-    specs
-}
+mod common;
+use common::shipped_specs;
 
 /// Luminance of each pixel, box-blurred over 5 × 5 pixels (clamped at edges).
 fn blurred_luminance(f: &Frame) -> Vec<f64> {
