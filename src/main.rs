@@ -80,6 +80,24 @@ enum Command {
         #[command(flatten)]
         view: ViewArgs,
     },
+    /// Design live in the browser: a local page with the spec's every key,
+    /// the moiré under tilt sliders, the (a, d) grid, the device and mold
+    /// in 3D, the checks, and "Write files" into DIR. Prints its URL.
+    Studio {
+        /// The spec to edit ("Save spec" writes it back). Without it, the
+        /// reference design, saved as DIR/spec.toml.
+        spec: Option<PathBuf>,
+        /// Where "Write files" writes.
+        #[arg(short, long, default_value = "moirecast-out")]
+        out: PathBuf,
+        /// Port; 0 picks a free one.
+        #[arg(long, default_value_t = 7878)]
+        port: u16,
+        /// Address to listen on. Anything but loopback lets other machines
+        /// use the page, and write files here: a warning says so.
+        #[arg(long, default_value = "127.0.0.1")]
+        host: std::net::IpAddr,
+    },
     /// Build the device and its two-piece casting mold: DIR/device.stl,
     /// DIR/mold-top.stl, DIR/mold-bottom.stl, DIR/assembly.scad and DIR/report.json.
     Mold {
@@ -412,6 +430,29 @@ fn run(cli: Cli) -> Result<()> {
                 eprintln!("best cell: a = {a}, d = {d:.4} mm, level-line contrast {f:.3}");
                 print_written(&done.written, done.bytes, started);
             }
+        }
+        Command::Studio {
+            spec,
+            out,
+            port,
+            host,
+        } => {
+            if !host.is_loopback() {
+                eprintln!("warning: --host {host} serves the studio beyond this machine: anyone who reaches it can edit the spec and write files into {}", out.display());
+            }
+            moirecast::studio::run(
+                moirecast::studio::StudioOptions {
+                    spec,
+                    out,
+                    host,
+                    port,
+                },
+                |url| {
+                    use std::io::Write;
+                    println!("moirecast studio: {url}");
+                    let _ = std::io::stdout().flush();
+                },
+            )?;
         }
         Command::Mold { run, force } => {
             let (bars, started, spec) = start(&run)?;

@@ -245,6 +245,22 @@ pub struct DeviceOutputs<'a> {
     pub crosscheck: Option<&'a moirecast_brep::CrossCheck>,
 }
 
+/// The derived numbers of `spec`'s design (METHOD §2).
+pub fn derived(spec: &Spec) -> Derived {
+    let d = &spec.design;
+    let s = &d.standard;
+    Derived {
+        N: d.lenses,
+        w_s: s.width,
+        r_s: s.radius,
+        s_s: s.sag,
+        F_s: s.focal_length,
+        D_s: s.focal_depth,
+        max_surface_slope_deg: d.max_slope.to_degrees(),
+        max_surface_curvature_per_mm: d.max_curvature,
+    }
+}
+
 pub fn device_report(
     spec: &Spec,
     build: &DeviceBuild,
@@ -252,7 +268,6 @@ pub fn device_report(
     outputs: DeviceOutputs,
 ) -> DeviceReport {
     let d = &spec.design;
-    let s = &d.standard;
     let st = &build.mesh.stats;
     let ls = &build.lens_stats;
     let shift = measure::shift_range(d);
@@ -261,16 +276,7 @@ pub fn device_report(
         moirecast: env!("CARGO_PKG_VERSION"),
         spec: spec_name(spec),
         design: design_echo(spec),
-        derived: Derived {
-            N: d.lenses,
-            w_s: s.width,
-            r_s: s.radius,
-            s_s: s.sag,
-            F_s: s.focal_length,
-            D_s: s.focal_depth,
-            max_surface_slope_deg: d.max_slope.to_degrees(),
-            max_surface_curvature_per_mm: d.max_curvature,
-        },
+        derived: derived(spec),
         files: outputs.files,
         mesh: MeshReport {
             triangles: st.triangles,

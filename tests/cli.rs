@@ -6,54 +6,11 @@ use std::process::Command;
 
 const BIN: &str = env!("CARGO_BIN_EXE_moirecast");
 
-/// A small valid design: fast in debug builds.
-const SMALL: &str = r#"
-[surface]
-kind = "saddle"
-radius = 40.0
-[layout]
-width = 4.0
-height = 3.0
-period = 0.5
-[lens]
-afov = 60.0
-index = 1.41
-[base]
-kind = "dual-lens"
-a = 0.0
-d = "focal"
-levels = 1.0
-[profile]
-kind = "bump"
-sigma = 1.5
-[mesh]
-tolerance = 0.004
-"#;
-
-/// A fresh directory for one test, removed when the test passes (kept for
-/// a look when it fails).
-struct Scratch(PathBuf);
-
-impl std::ops::Deref for Scratch {
-    type Target = Path;
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        if !std::thread::panicking() {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
-}
+mod common;
+use common::{Scratch, SMALL};
 
 fn scratch(name: &str) -> Scratch {
-    let dir = std::env::temp_dir().join(format!("moirecast-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    Scratch(dir)
+    common::scratch("cli", name)
 }
 
 fn run(spec_text: &str, dir: &Path) -> (bool, String, PathBuf) {

@@ -50,6 +50,12 @@ const EMBEDDED_IMAGES: &[(&str, &[u8])] = &[
     ),
 ];
 
+/// The profile images shipped inside the binary, by the name the default
+/// design gives them ("profiles/horse.png").
+pub fn embedded_images() -> impl Iterator<Item = (&'static str, &'static [u8])> {
+    EMBEDDED_IMAGES.iter().copied()
+}
+
 /// Gaussian blur σ of an image profile (mm).
 pub const BLUR_MM: (f64, f64) = (0.0, 20.0);
 

@@ -1,0 +1,755 @@
+//! `moirecast studio`: a local web page that designs a device live.
+//!
+//! One spec at a time, in revisions: every accepted edit (`PUT /api/spec`)
+//! makes a new [`Revision`], and everything derived from it (frames, the
+//! device mesh and report, the mold halves, the explore grid) is built on
+//! first request and cached with it. A refused edit changes nothing: the
+//! last good revision stays on screen.
+//!
+//! Frames are rendered by one worker thread per revision, which owns that
+//! revision's scenes and sections; a frame request that a newer one
+//! overtakes while it waits is answered `409` unrendered, so dragging a
+//! slider never queues stale frames.
+//!
+//! Safety: the server binds the loopback address unless told otherwise,
+//! refuses requests whose `Host` is not the address it serves (DNS
+//! rebinding), refuses bodies over [`MAX_BODY_BYTES`], serves no file but
+//! its embedded page, writes only into `-o DIR` and saves only the spec
+//! file, and refuses profile images outside the spec's folder.
+
+mod frames;
+mod views;
+
+use crate::errors::RunError;
+use crate::report::{derived, design_echo};
+use axum::body::Body;
+use axum::extract::{DefaultBodyLimit, Path as UrlPath, Query, Request, State};
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
+use axum::middleware::{self, Next};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Json, Router};
+use frames::{FrameReply, FrameRequest, Frames};
+use moirecast_kernel::progress::Progress;
+use moirecast_spec::{ImageSource, Spec, SpecError};
+use serde::Deserialize;
+use serde_json::json;
+use std::net::{IpAddr, SocketAddr};
+use std::path::{Component, Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock, RwLock};
+use tokio::sync::broadcast;
+use views::{DeviceView, ExploreView, MoldView};
+
+/// Request bodies larger than this are refused with 413.
+pub const MAX_BODY_BYTES: usize = 1_000_000;
+
+/// The page: one HTML file with its script and style inline, embedded in
+/// the binary (no CDN, no build step).
+const PAGE: &str = include_str!("page.html");
+
+/// How `moirecast studio` was started.
+pub struct StudioOptions {
+    /// The spec file the page edits and saves; `None`: the reference
+    /// design, saved as `DIR/spec.toml`.
+    pub spec: Option<PathBuf>,
+    /// Where "Write files" writes (`-o DIR`).
+    pub out: PathBuf,
+    pub host: IpAddr,
+    pub port: u16,
+}
+
+/// Where the spec's text and its images live.
+enum Home {
+    /// A spec file: it is saved in place, images resolve beside it.
+    File { path: PathBuf, dir: PathBuf },
+    /// The embedded reference design: saved into `-o DIR`.
+    Embedded,
+}
+
+/// One accepted spec and everything derived from it, built on demand.
+pub struct Revision {
+    pub number: u64,
+    pub text: String,
+    pub spec: Arc<Spec>,
+    frames: Frames,
+    device: OnceLock<Result<Arc<DeviceView>, String>>,
+    mold: OnceLock<Result<Arc<MoldView>, String>>,
+    explore: OnceLock<Result<Arc<ExploreView>, String>>,
+}
+
+impl Revision {
+    fn new(number: u64, text: String, spec: Spec) -> Revision {
+        let spec = Arc::new(spec);
+        Revision {
+            number,
+            text,
+            frames: Frames::start(spec.clone()),
+            spec,
+            device: OnceLock::new(),
+            mold: OnceLock::new(),
+            explore: OnceLock::new(),
+        }
+    }
+
+    /// The device's mesh, STL and report (built once, on a blocking thread).
+    async fn device(self: &Arc<Self>) -> Result<Arc<DeviceView>, String> {
+        let rev = self.clone();
+        blocking(move || {
+            rev.device
+                .get_or_init(|| {
+                    DeviceView::build(&rev.spec)
+                        .map(Arc::new)
+                        .map_err(cli_words)
+                })
+                .clone()
+        })
+        .await
+    }
+
+    async fn mold(self: &Arc<Self>) -> Result<Arc<MoldView>, String> {
+        let rev = self.clone();
+        blocking(move || {
+            rev.mold
+                .get_or_init(|| MoldView::build(&rev.spec).map(Arc::new).map_err(cli_words))
+                .clone()
+        })
+        .await
+    }
+
+    async fn explore(self: &Arc<Self>) -> Result<Arc<ExploreView>, String> {
+        let rev = self.clone();
+        blocking(move || {
+            rev.explore
+                .get_or_init(|| {
+                    ExploreView::build(&rev.spec)
+                        .map(Arc::new)
+                        .map_err(cli_words)
+                })
+                .clone()
+        })
+        .await
+    }
+}
+
+/// An error as the command line prints it.
+fn cli_words(e: anyhow::Error) -> String {
+    format!("error: {e:#}")
+}
+
+/// Runs `f` on tokio's blocking pool.
+async fn blocking<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+    tokio::task::spawn_blocking(f)
+        .await
+        .expect("a studio task panicked")
+}
+
+/// The server's state.
+pub struct Studio {
+    home: Home,
+    out: PathBuf,
+    /// `Host` header values the server answers to.
+    hosts: Vec<String>,
+    current: RwLock<Arc<Revision>>,
+    revisions: AtomicU64,
+    /// Progress and results of writes, as server-sent events.
+    events: broadcast::Sender<String>,
+    writing: AtomicBool,
+}
+
+impl Studio {
+    fn current(&self) -> Arc<Revision> {
+        self.current.read().expect("not poisoned").clone()
+    }
+
+    /// The spec's name in messages, as the command line names it.
+    fn file_name(&self) -> String {
+        match &self.home {
+            Home::File { path, .. } => path.display().to_string(),
+            Home::Embedded => "<default: molds/saddle-horse.toml>".into(),
+        }
+    }
+
+    fn images(&self) -> ImageSource<'_> {
+        match &self.home {
+            Home::File { dir, .. } => ImageSource::Dir(dir),
+            Home::Embedded => ImageSource::Embedded,
+        }
+    }
+
+    /// Parses and validates `text` as the command line would, and refuses
+    /// profile images outside the spec's folder.
+    fn parse(&self, text: &str) -> Result<Spec, Vec<serde_json::Value>> {
+        if let Some(image) = toml::from_str::<toml::Table>(text)
+            .ok()
+            .and_then(|t| t.get("profile")?.get("image")?.as_str().map(str::to_owned))
+        {
+            if !is_plain_relative(Path::new(&image)) {
+                return Err(vec![json!({
+                    "key": "profile.image",
+                    "value": format!("{image:?}"),
+                    "message": "the studio reads images only inside the spec's folder",
+                    "fix": "pick an image from the list, or give a path relative to the spec's folder without `..`",
+                    "cli": format!("error: spec `{}`: `profile.image` = {image:?}: the studio reads images only inside the spec's folder.\n  Fix: give a path relative to the spec's folder without `..`", self.file_name()),
+                })]);
+            }
+        }
+        moirecast_spec::parse(text, &self.file_name(), self.images())
+            .map_err(|e| vec![spec_error_json(&e)])
+    }
+
+    /// The state the page shows: the spec's text and values, and the design.
+    fn state(&self, rev: &Revision) -> serde_json::Value {
+        let values: serde_json::Value = toml::from_str::<toml::Table>(&rev.text)
+            .ok()
+            .and_then(|t| serde_json::to_value(t).ok())
+            .unwrap_or_default();
+        json!({
+            "revision": rev.number,
+            "spec": rev.text,
+            "values": values,
+            "design": design_echo(&rev.spec),
+            "derived": derived(&rev.spec),
+            "spec_file": match &self.home {
+                Home::File { path, .. } => path.display().to_string(),
+                Home::Embedded => self.out.join("spec.toml").display().to_string(),
+            },
+            "out": self.out.display().to_string(),
+        })
+    }
+}
+
+/// A path with only normal components: no root, no `..`.
+fn is_plain_relative(path: &Path) -> bool {
+    path.components().all(|c| matches!(c, Component::Normal(_)))
+        && path.components().next().is_some()
+}
+
+/// A spec error as JSON: the key, the value, the problem and the fix, and
+/// the whole message as the command line prints it.
+fn spec_error_json(e: &SpecError) -> serde_json::Value {
+    let cli = format!("error: {e}");
+    match e {
+        SpecError::Invalid {
+            key,
+            value,
+            problem,
+            fix,
+            ..
+        } => json!({"key": key, "value": value, "message": problem, "fix": fix, "cli": cli}),
+        SpecError::Syntax { message, .. } => {
+            json!({"key": null, "value": null, "message": message, "fix": "correct the TOML", "cli": cli})
+        }
+        SpecError::Read { .. } => {
+            json!({"key": null, "value": null, "message": e.to_string(), "fix": "", "cli": cli})
+        }
+    }
+}
+
+/// Starts the studio on `options.host:options.port` and serves until the
+/// process ends. `announce` is told the URL once the port is bound.
+pub fn run(options: StudioOptions, announce: impl FnOnce(&str)) -> anyhow::Result<()> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind((options.host, options.port)).await?;
+        let (router, url) = router(&options, listener.local_addr()?)?;
+        announce(&url);
+        axum::serve(listener, router).await?;
+        Ok(())
+    })
+}
+
+/// The studio's routes for `options`, served at `addr`, and its URL.
+pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Router, String)> {
+    let (home, text) = match &options.spec {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| anyhow::anyhow!("cannot read spec `{}`: {e}", path.display()))?;
+            let dir = path
+                .parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(Path::new("."))
+                .to_owned();
+            let home = Home::File {
+                path: path.clone(),
+                dir,
+            };
+            (home, text)
+        }
+        None => (Home::Embedded, moirecast_spec::DEFAULT_SPEC.to_owned()),
+    };
+    let port = addr.port();
+    let mut hosts = vec![
+        format!("127.0.0.1:{port}"),
+        format!("localhost:{port}"),
+        format!("[::1]:{port}"),
+    ];
+    match addr.ip() {
+        IpAddr::V4(ip) => hosts.push(format!("{ip}:{port}")),
+        IpAddr::V6(ip) => hosts.push(format!("[{ip}]:{port}")),
+    }
+    let studio = Studio {
+        home,
+        out: options.out.clone(),
+        hosts,
+        current: RwLock::new(Arc::new(Revision::new(
+            0,
+            String::new(),
+            moirecast_spec::default_spec()?,
+        ))),
+        revisions: AtomicU64::new(1),
+        events: broadcast::channel(1024).0,
+        writing: AtomicBool::new(false),
+    };
+    // the spec given must itself be valid: a studio opens on a design
+    let spec = studio.parse(&text).map_err(|errors| {
+        anyhow::anyhow!(
+            "{}",
+            errors[0]["cli"]
+                .as_str()
+                .unwrap_or("invalid spec")
+                .trim_start_matches("error: ")
+        )
+    })?;
+    *studio.current.write().expect("not poisoned") = Arc::new(Revision::new(1, text, spec));
+    let studio = Arc::new(studio);
+    let url = match addr.ip() {
+        IpAddr::V6(ip) => format!("http://[{ip}]:{port}/"),
+        IpAddr::V4(ip) => format!("http://{ip}:{port}/"),
+    };
+    let router = Router::new()
+        .route("/", get(page))
+        .route("/api/keys", get(keys))
+        .route("/api/state", get(state))
+        .route("/api/spec", get(get_spec).put(put_spec))
+        .route("/api/save", post(save))
+        .route("/api/profiles", get(profiles))
+        .route("/api/frame.png", get(frame))
+        .route("/api/report", get(report))
+        .route("/api/device.stl", get(device_stl))
+        .route("/api/mold/{part}", get(mold_stl))
+        .route("/api/explore", get(explore))
+        .route("/api/explore/{cell}", get(explore_cell))
+        .route("/api/write", post(write))
+        .route("/api/events", get(events))
+        .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
+        .layer(middleware::from_fn_with_state(
+            studio.clone(),
+            loopback_only,
+        ))
+        .with_state(studio);
+    Ok((router, url))
+}
+
+/// Refuses requests whose `Host` is not an address this server answers
+/// at: a page on another site that rebinds its name to 127.0.0.1 sends
+/// its own name.
+async fn loopback_only(
+    State(studio): State<Arc<Studio>>,
+    request: Request,
+    next: Next,
+) -> Response {
+    let host = request
+        .headers()
+        .get(header::HOST)
+        .and_then(|h| h.to_str().ok())
+        .unwrap_or("");
+    if !studio.hosts.iter().any(|h| h == host) {
+        return error(
+            StatusCode::FORBIDDEN,
+            format!(
+                "Host `{host}` is not this studio's address ({})",
+                studio.hosts[0]
+            ),
+        );
+    }
+    next.run(request).await
+}
+
+/// A JSON error body `{"error": message}`.
+fn error(status: StatusCode, message: impl Into<String>) -> Response {
+    (status, Json(json!({"error": message.into()}))).into_response()
+}
+
+/// A body of `content_type`.
+fn bytes(content_type: &'static str, body: Vec<u8>) -> Response {
+    let mut response = Response::new(Body::from(body));
+    response
+        .headers_mut()
+        .insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+    response
+}
+
+async fn page() -> Html<&'static str> {
+    Html(PAGE)
+}
+
+async fn keys() -> Json<Vec<moirecast_spec::KeyDoc>> {
+    Json(moirecast_spec::keys())
+}
+
+async fn state(State(studio): State<Arc<Studio>>) -> Json<serde_json::Value> {
+    Json(studio.state(&studio.current()))
+}
+
+async fn get_spec(State(studio): State<Arc<Studio>>) -> Response {
+    bytes(
+        "application/toml",
+        studio.current().text.clone().into_bytes(),
+    )
+}
+
+/// A new spec: 200 with the new state, or 422 with the errors (and the
+/// last good revision kept).
+async fn put_spec(State(studio): State<Arc<Studio>>, text: String) -> Response {
+    let parsed = {
+        let (studio, text) = (studio.clone(), text.clone());
+        blocking(move || studio.parse(&text)).await
+    };
+    match parsed {
+        Err(errors) => (
+            StatusCode::UNPROCESSABLE_ENTITY,
+            Json(json!({"errors": errors, "revision": studio.current().number})),
+        )
+            .into_response(),
+        Ok(spec) => {
+            let number = studio.revisions.fetch_add(1, Ordering::Relaxed) + 1;
+            let rev = Arc::new(Revision::new(number, text, spec));
+            *studio.current.write().expect("not poisoned") = rev.clone();
+            Json(studio.state(&rev)).into_response()
+        }
+    }
+}
+
+/// Writes the current spec's text to the spec file (or `DIR/spec.toml`
+/// with the embedded images it names, for the reference design).
+async fn save(State(studio): State<Arc<Studio>>) -> Response {
+    let rev = studio.current();
+    let result = blocking(move || -> anyhow::Result<PathBuf> {
+        let mut files = moirecast_export::OutputSet::new();
+        let (dir, name) = match &studio.home {
+            Home::File { path, dir } => (
+                dir.clone(),
+                path.file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "spec.toml".into()),
+            ),
+            Home::Embedded => (studio.out.clone(), "spec.toml".to_string()),
+        };
+        files.add(&name, rev.text.clone().into_bytes());
+        let mut written = files.commit(&dir)?;
+        if let Home::Embedded = studio.home {
+            for (image, data) in moirecast_spec::embedded_images() {
+                if rev.text.contains(image) {
+                    let path = studio.out.join(image);
+                    let mut one = moirecast_export::OutputSet::new();
+                    let file = path.file_name().expect("an image name").to_string_lossy();
+                    one.add(&file, data.to_vec());
+                    one.commit(path.parent().expect("inside DIR"))?;
+                }
+            }
+        }
+        Ok(written.remove(0))
+    })
+    .await;
+    match result {
+        Ok(path) => Json(json!({"saved": path.display().to_string()})).into_response(),
+        Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, cli_words(e)),
+    }
+}
+
+/// The PNG images the spec may name: inside its folder, two levels deep.
+async fn profiles(State(studio): State<Arc<Studio>>) -> Json<Vec<String>> {
+    let found = match &studio.home {
+        Home::Embedded => moirecast_spec::embedded_images()
+            .map(|(n, _)| n.to_string())
+            .collect(),
+        Home::File { dir, .. } => {
+            let mut found = Vec::new();
+            let pngs = |sub: &Path, found: &mut Vec<String>, dirs: &mut Vec<PathBuf>| {
+                for entry in std::fs::read_dir(dir.join(sub))
+                    .into_iter()
+                    .flatten()
+                    .flatten()
+                {
+                    let name = sub.join(entry.file_name());
+                    match entry.file_type() {
+                        Ok(t) if t.is_dir() => dirs.push(name),
+                        Ok(_)
+                            if name
+                                .extension()
+                                .is_some_and(|e| e.eq_ignore_ascii_case("png")) =>
+                        {
+                            found.push(name.display().to_string())
+                        }
+                        _ => {}
+                    }
+                }
+            };
+            let mut dirs = Vec::new();
+            pngs(Path::new(""), &mut found, &mut dirs);
+            for sub in dirs {
+                pngs(&sub, &mut found, &mut Vec::new());
+            }
+            found.sort();
+            found
+        }
+    };
+    Json(found)
+}
+
+#[derive(Deserialize)]
+struct FrameQuery {
+    #[serde(default)]
+    tilt: f64,
+    #[serde(default)]
+    along: f64,
+    #[serde(default = "default_size")]
+    size: usize,
+    #[serde(default = "default_samples")]
+    samples: usize,
+    #[serde(default = "default_lights")]
+    lights: String,
+}
+
+fn default_size() -> usize {
+    256
+}
+fn default_samples() -> usize {
+    4
+}
+fn default_lights() -> String {
+    "default".into()
+}
+
+/// One frame of the current design as PNG; its scores in `x-*` headers.
+async fn frame(State(studio): State<Arc<Studio>>, Query(q): Query<FrameQuery>) -> Response {
+    let lights = match crate::render::LightsChoice::parse(&q.lights) {
+        Ok(l) => l,
+        Err(e) => return error(StatusCode::BAD_REQUEST, format!("lights: {e}")),
+    };
+    let request = FrameRequest {
+        tilt_deg: q.tilt,
+        along_deg: q.along,
+        size: q.size,
+        samples: q.samples,
+        lights,
+    };
+    if let Err(e) = request.validate() {
+        return error(StatusCode::BAD_REQUEST, e);
+    }
+    let rev = studio.current();
+    match rev.frames.render(request).await {
+        FrameReply::Done(f) => {
+            let mut response = bytes("image/png", f.png);
+            let h = response.headers_mut();
+            for (name, value) in [
+                ("x-revision", rev.number as f64),
+                ("x-fidelity", f.fidelity),
+                ("x-local-fidelity", f.local_fidelity),
+                ("x-contrast", f.contrast),
+                ("x-render-ms", f.milliseconds),
+            ] {
+                h.insert(
+                    name,
+                    HeaderValue::from_str(&format!("{value}")).expect("a number"),
+                );
+            }
+            h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+            response
+        }
+        FrameReply::Superseded => error(
+            StatusCode::CONFLICT,
+            "superseded: a newer frame request arrived before this one was rendered",
+        ),
+        FrameReply::Failed(e) => error(StatusCode::UNPROCESSABLE_ENTITY, e),
+    }
+}
+
+/// The device's report (checks and measurements), and the mold's checks
+/// and warnings once the mold has been built.
+async fn report(State(studio): State<Arc<Studio>>) -> Response {
+    let rev = studio.current();
+    let device = match rev.device().await {
+        Ok(d) => d,
+        Err(e) => return error(StatusCode::UNPROCESSABLE_ENTITY, e),
+    };
+    let mut report = device.report.clone();
+    report["revision"] = json!(rev.number);
+    if let Some(Ok(mold)) = rev.mold.get() {
+        report["mold"] = json!({"checks": mold.checks, "warnings": mold.warnings});
+    }
+    Json(report).into_response()
+}
+
+async fn device_stl(State(studio): State<Arc<Studio>>) -> Response {
+    match studio.current().device().await {
+        Ok(d) => bytes("model/stl", d.stl.clone()),
+        Err(e) => error(StatusCode::UNPROCESSABLE_ENTITY, e),
+    }
+}
+
+/// `top.stl`, `bottom.stl`, or `device.stl` (the cavity: the device in the
+/// mold's frame).
+async fn mold_stl(State(studio): State<Arc<Studio>>, UrlPath(part): UrlPath<String>) -> Response {
+    if !["top.stl", "bottom.stl", "device.stl"].contains(&part.as_str()) {
+        return error(StatusCode::NOT_FOUND, format!("no mold part `{part}`"));
+    }
+    match studio.current().mold().await {
+        Ok(m) => bytes(
+            "model/stl",
+            match part.as_str() {
+                "top.stl" => m.top.clone(),
+                "bottom.stl" => m.bottom.clone(),
+                _ => m.device.clone(),
+            },
+        ),
+        Err(e) => error(StatusCode::UNPROCESSABLE_ENTITY, e),
+    }
+}
+
+async fn explore(State(studio): State<Arc<Studio>>) -> Response {
+    let rev = studio.current();
+    match rev.explore().await {
+        Ok(grid) => Json(json!({
+            "revision": rev.number,
+            "cells": grid.cells,
+            "best": grid.best,
+            "columns": crate::explore::A_VALUES.len(),
+            "thumbnails": (0..grid.cells.len()).map(|i| format!("/api/explore/{i}.png")).collect::<Vec<_>>(),
+        }))
+        .into_response(),
+        Err(e) => error(StatusCode::UNPROCESSABLE_ENTITY, e),
+    }
+}
+
+async fn explore_cell(
+    State(studio): State<Arc<Studio>>,
+    UrlPath(cell): UrlPath<String>,
+) -> Response {
+    let rev = studio.current();
+    let Some(i) = cell
+        .strip_suffix(".png")
+        .and_then(|i| i.parse::<usize>().ok())
+    else {
+        return error(StatusCode::NOT_FOUND, format!("no cell `{cell}`"));
+    };
+    match rev.explore().await {
+        Ok(grid) => match grid.thumbnails.get(i) {
+            Some(png) => bytes("image/png", png.clone()),
+            None => error(StatusCode::NOT_FOUND, format!("no cell {i}")),
+        },
+        Err(e) => error(StatusCode::UNPROCESSABLE_ENTITY, e),
+    }
+}
+
+#[derive(Deserialize)]
+struct WriteQuery {
+    what: String,
+}
+
+/// Progress of a write, as server-sent events.
+struct EventProgress(broadcast::Sender<String>);
+
+impl Progress for EventProgress {
+    fn stage(&self, name: &'static str, total: u64) {
+        let _ = self
+            .0
+            .send(json!({"kind": "stage", "name": name, "total": total}).to_string());
+    }
+    fn tick(&self, n: u64) {
+        let _ = self.0.send(json!({"kind": "tick", "n": n}).to_string());
+    }
+}
+
+/// Starts writing the device's files or the whole mold into `-o DIR`, by
+/// the command line's own pipeline; progress and the result arrive on
+/// `/api/events`.
+async fn write(State(studio): State<Arc<Studio>>, Query(q): Query<WriteQuery>) -> Response {
+    let mold = match q.what.as_str() {
+        "device" => false,
+        "mold" => true,
+        other => {
+            return error(
+                StatusCode::BAD_REQUEST,
+                format!("what={other}: write `device` or `mold`"),
+            )
+        }
+    };
+    if studio.writing.swap(true, Ordering::AcqRel) {
+        return error(StatusCode::CONFLICT, "a write is already running");
+    }
+    let rev = studio.current();
+    let number = rev.number;
+    let task_studio = studio.clone();
+    tokio::task::spawn_blocking(move || {
+        let studio = task_studio;
+        let progress = EventProgress(studio.events.clone());
+        let what = if mold { "mold" } else { "device" };
+        let _ = studio
+            .events
+            .send(json!({"kind": "start", "what": what, "revision": rev.number}).to_string());
+        let result = if mold {
+            crate::run_mold(&rev.spec, &studio.out, false, &progress)
+                .map(|o| (o.written, o.bytes, o.warnings))
+        } else {
+            crate::run_device(
+                &rev.spec,
+                &studio.out,
+                crate::Thoroughness::Sampled,
+                crate::Mesher::Direct,
+                &progress,
+            )
+            .map(|o| (o.written, o.bytes, Vec::new()))
+        };
+        let event = match result {
+            Ok((written, bytes, warnings)) => json!({
+                "kind": "done",
+                "what": what,
+                "written": written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+                "bytes": bytes,
+                "warnings": warnings,
+            }),
+            Err(e) => json!({
+                "kind": "error",
+                "what": what,
+                "refusal": e.downcast_ref::<RunError>().is_some_and(RunError::is_refusal),
+                "message": cli_words(e),
+            }),
+        };
+        studio.writing.store(false, Ordering::Release);
+        let _ = studio.events.send(event.to_string());
+    });
+    (
+        StatusCode::ACCEPTED,
+        Json(json!({"started": q.what, "revision": number, "events": "/api/events"})),
+    )
+        .into_response()
+}
+
+/// Server-sent events: one JSON object per event (`start`, `stage`,
+/// `tick`, `done`, `error`).
+async fn events(State(studio): State<Arc<Studio>>) -> impl IntoResponse {
+    let receiver = studio.events.subscribe();
+    let stream = futures_util::stream::unfold(receiver, |mut rx| async move {
+        loop {
+            match rx.recv().await {
+                Ok(message) => {
+                    return Some((
+                        Ok::<_, std::convert::Infallible>(Event::default().data(message)),
+                        rx,
+                    ))
+                }
+                Err(broadcast::error::RecvError::Lagged(_)) => continue,
+                Err(broadcast::error::RecvError::Closed) => return None,
+            }
+        }
+    });
+    let mut headers = HeaderMap::new();
+    headers.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    (headers, Sse::new(stream).keep_alive(KeepAlive::default()))
+}

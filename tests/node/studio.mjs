@@ -1,0 +1,119 @@
+// The studio in a real browser: Debian's chromium, headless, driven over
+// the DevTools protocol by playwright-core (no browser download).
+//
+//   node tests/node/studio.mjs MOIRECAST_BIN WORKDIR SCREENSHOT
+//
+// Copies the reference spec and its image into WORKDIR, starts
+// `moirecast studio` on a free port, and checks what a designer does:
+// the first frame arrives; the tilt slider changes the frame; afov = 200
+// is refused at its field, naming `lens.afov`; the 3D view orbits;
+// "Write device files" writes device.stl into the output folder. Saves a
+// screenshot of the page. Exits non-zero, saying why, on any failure.
+
+import { spawn } from "node:child_process";
+import { copyFileSync, existsSync, mkdirSync } from "node:fs";
+import { dirname, join } from "node:path";
+import { fileURLToPath } from "node:url";
+import { chromium } from "playwright-core";
+
+const [bin, work, screenshot] = process.argv.slice(2);
+if (!bin || !work || !screenshot) {
+  console.error("usage: node studio.mjs MOIRECAST_BIN WORKDIR SCREENSHOT");
+  process.exit(2);
+}
+const repo = join(dirname(fileURLToPath(import.meta.url)), "..", "..");
+mkdirSync(join(work, "profiles"), { recursive: true });
+copyFileSync(join(repo, "molds", "saddle-horse.toml"), join(work, "design.toml"));
+copyFileSync(join(repo, "molds", "profiles", "horse.png"), join(work, "profiles", "horse.png"));
+const out = join(work, "out");
+
+const server = spawn(bin, ["studio", join(work, "design.toml"), "-o", out, "--port", "0"], {
+  stdio: ["ignore", "pipe", "inherit"],
+});
+const url = await new Promise((resolve, reject) => {
+  let text = "";
+  server.stdout.on("data", (chunk) => {
+    text += chunk;
+    const m = text.match(/moirecast studio: (http:\/\/\S+)/);
+    if (m) resolve(m[1]);
+  });
+  server.on("exit", (code) => reject(new Error(`the studio exited (${code}) before printing its URL`)));
+  setTimeout(() => reject(new Error("no URL after 30 s")), 30000);
+});
+
+const browser = await chromium.launch({
+  executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
+  args: [
+    "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+  ],
+});
+let failed = false;
+const check = (ok, what) => {
+  console.log(`${ok ? "ok  " : "FAIL"} ${what}`);
+  if (!ok) failed = true;
+};
+try {
+  const page = await browser.newPage({ viewport: { width: 1400, height: 1000 } });
+  page.on("pageerror", (e) => check(false, `no script error on the page: ${e.message}`));
+  await page.goto(url);
+
+  // the first frame
+  await page.waitForFunction(() => window.studio && window.studio.frames >= 1, null, { timeout: 60000 });
+  const before = await page.locator("#frame").screenshot();
+  check(before.length > 1000, "the first frame arrives");
+
+  // the tilt slider changes the frame
+  const frames = await page.evaluate(() => window.studio.frames);
+  await page.locator("#tilt").fill("6");
+  await page.waitForFunction(
+    ([n]) => window.studio.frames > n && document.getElementById("frame").dataset.tilt === "6",
+    [frames],
+    { timeout: 60000 },
+  );
+  await page.waitForTimeout(200);
+  const after = await page.locator("#frame").screenshot();
+  check(!before.equals(after), "moving the tilt slider changes the frame");
+
+  // afov = 200 is refused at its field, naming the key
+  await page.locator("#f-lens-afov").fill("200");
+  await page.locator("#f-lens-afov").press("Tab");
+  await page.waitForFunction(
+    () => document.querySelector('.field[data-key="lens.afov"] .error').textContent.length > 0,
+    null,
+    { timeout: 30000 },
+  );
+  const error = await page.locator('.field[data-key="lens.afov"] .error').textContent();
+  check(error.includes("lens.afov") && error.includes("200"), `afov = 200 is refused at the field: ${JSON.stringify(error.split("\n")[0])}`);
+  const state = await (await page.request.get(url + "api/state")).json();
+  check(state.values.lens.afov === 60, "the last good design stays (lens.afov = 60)");
+
+  // the 3D view: the device loads, and dragging orbits it
+  await page.waitForFunction(() => window.studio.view.meshes.length > 0, null, { timeout: 60000 });
+  const canvas = page.locator("#view3d");
+  const still = await canvas.screenshot();
+  const yaw = await page.evaluate(() => window.studio.yaw);
+  const box = await canvas.boundingBox();
+  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  await page.mouse.down();
+  await page.mouse.move(box.x + box.width / 2 + 120, box.y + box.height / 2 + 30, { steps: 8 });
+  await page.mouse.up();
+  const orbited = await canvas.screenshot();
+  const yawAfter = await page.evaluate(() => window.studio.yaw);
+  check(yawAfter !== yaw && !still.equals(orbited), `dragging orbits the 3D view (yaw ${yaw.toFixed(2)} → ${yawAfter.toFixed(2)})`);
+
+  // "Write device files" writes device.stl
+  await page.locator("#write-device").click();
+  await page.waitForFunction(() => document.getElementById("written").textContent.includes("device.stl"), null, { timeout: 120000 });
+  check(existsSync(join(out, "device.stl")), `device.stl is written into ${out}`);
+
+  await page.screenshot({ path: screenshot, fullPage: true });
+  console.log(`screenshot: ${screenshot}`);
+} catch (e) {
+  check(false, String(e));
+} finally {
+  await browser.close();
+  server.kill();
+}
+process.exit(failed ? 1 : 0);

@@ -1,0 +1,34 @@
+"""`moirecast studio` in a real browser: Debian's chromium, headless,
+driven over the DevTools protocol by tests/node/studio.mjs (playwright-core,
+installed by scripts/test-all.sh). The first frame arrives, the tilt slider
+changes it, afov = 200 is refused at its field naming `lens.afov`, the 3D
+view orbits, "Write device files" writes device.stl; a screenshot is saved
+as target/studio-screenshot.png."""
+import os
+import subprocess
+
+import pytest
+from conftest import BIN, ROOT, tool
+
+RUNNER = ROOT / "tests" / "node" / "studio.mjs"
+
+
+def test_the_studio_works_in_chromium(tmp_path):
+    node = tool("node")
+    tool("chromium")
+    if not (ROOT / "tests" / "node" / "node_modules" / "playwright-core").exists():
+        msg = "playwright-core is not installed: run `npm ci --prefix tests/node`"
+        if os.environ.get("CI") == "true":
+            pytest.fail(msg)
+        pytest.skip(msg)
+    screenshot = ROOT / "target" / "studio-screenshot.png"
+    run = subprocess.run(
+        [node, str(RUNNER), str(BIN), str(tmp_path), str(screenshot)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    print(run.stdout)
+    assert run.returncode == 0, f"{run.stdout}\n{run.stderr}"
+    assert "FAIL" not in run.stdout
+    assert screenshot.stat().st_size > 10_000

@@ -1,0 +1,486 @@
+//! `moirecast studio`'s HTTP API on a server bound to port 0: every
+//! endpoint, refusals by key with the last good design kept, traversal
+//! attempts, a foreign Host, an oversized body, concurrent frames, and a
+//! write that gives the command line's bytes.
+
+mod common;
+
+use common::{scratch, Scratch, SMALL};
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::path::Path;
+use std::process::Command;
+
+/// An HTTP response: status, headers (lower-case names), body.
+struct Response {
+    status: u16,
+    headers: Vec<(String, String)>,
+    body: Vec<u8>,
+}
+
+impl Response {
+    fn header(&self, name: &str) -> Option<&str> {
+        self.headers
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_str())
+    }
+    fn json(&self) -> serde_json::Value {
+        serde_json::from_slice(&self.body).unwrap_or_else(|e| {
+            panic!(
+                "{e}: {} {}",
+                self.status,
+                String::from_utf8_lossy(&self.body)
+            )
+        })
+    }
+}
+
+/// A studio serving `spec` from its own thread, writing into `dir/out`.
+struct Studio {
+    port: u16,
+    dir: Scratch,
+}
+
+impl Studio {
+    fn start(name: &str, spec_text: &str) -> Studio {
+        let dir = scratch("studio", name);
+        std::fs::write(dir.join("design.toml"), spec_text).unwrap();
+        std::fs::create_dir_all(dir.join("profiles")).unwrap();
+        std::fs::copy(
+            concat!(env!("CARGO_MANIFEST_DIR"), "/molds/profiles/horse.png"),
+            dir.join("profiles/horse.png"),
+        )
+        .unwrap();
+        let (sender, receiver) = std::sync::mpsc::channel();
+        let options = moirecast::studio::StudioOptions {
+            spec: Some(dir.join("design.toml")),
+            out: dir.join("out"),
+            host: "127.0.0.1".parse().unwrap(),
+            port: 0,
+        };
+        std::thread::spawn(move || {
+            moirecast::studio::run(options, |url| sender.send(url.to_string()).unwrap()).unwrap()
+        });
+        let url = receiver.recv().unwrap();
+        let port = url
+            .trim_end_matches('/')
+            .rsplit(':')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        Studio { port, dir }
+    }
+
+    /// `method target` with `body`, Host set to the studio's address.
+    fn request(&self, method: &str, target: &str, body: &[u8]) -> Response {
+        self.request_as(&format!("127.0.0.1:{}", self.port), method, target, body)
+    }
+
+    fn get(&self, target: &str) -> Response {
+        self.request("GET", target, b"")
+    }
+
+    fn request_as(&self, host: &str, method: &str, target: &str, body: &[u8]) -> Response {
+        let mut stream = TcpStream::connect(("127.0.0.1", self.port)).unwrap();
+        write!(
+            stream,
+            "{method} {target} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+            body.len()
+        )
+        .unwrap();
+        // a refused body may close the connection before it is all sent
+        let _ = stream.write_all(body);
+        let mut raw = Vec::new();
+        stream.read_to_end(&mut raw).unwrap();
+        parse_response(&raw)
+    }
+
+    /// Reads `/api/events` until an event of `kind` `done` or `error`,
+    /// after starting it with `start`.
+    fn events_until_finished(&self, start: impl FnOnce()) -> String {
+        let mut stream = TcpStream::connect(("127.0.0.1", self.port)).unwrap();
+        write!(
+            stream,
+            "GET /api/events HTTP/1.1\r\nHost: 127.0.0.1:{}\r\n\r\n",
+            self.port
+        )
+        .unwrap();
+        let mut seen = Vec::new();
+        let mut chunk = [0u8; 4096];
+        // the stream's headers first: then the subscription exists
+        while !String::from_utf8_lossy(&seen).contains("\r\n\r\n") {
+            let n = stream.read(&mut chunk).unwrap();
+            seen.extend_from_slice(&chunk[..n]);
+        }
+        start();
+        stream
+            .set_read_timeout(Some(std::time::Duration::from_secs(300)))
+            .unwrap();
+        loop {
+            let text = String::from_utf8_lossy(&seen).into_owned();
+            if text.contains(r#""kind":"done""#) || text.contains(r#""kind":"error""#) {
+                return text;
+            }
+            let n = stream.read(&mut chunk).unwrap();
+            assert!(n > 0, "the event stream ended: {text}");
+            seen.extend_from_slice(&chunk[..n]);
+        }
+    }
+}
+
+fn parse_response(raw: &[u8]) -> Response {
+    let split = raw
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .expect("a header block");
+    let head = String::from_utf8_lossy(&raw[..split]).into_owned();
+    let mut lines = head.lines();
+    let status = lines
+        .next()
+        .unwrap()
+        .split(' ')
+        .nth(1)
+        .unwrap()
+        .parse()
+        .unwrap();
+    let headers: Vec<(String, String)> = lines
+        .filter_map(|l| l.split_once(':'))
+        .map(|(n, v)| (n.trim().to_ascii_lowercase(), v.trim().to_string()))
+        .collect();
+    let mut body = raw[split + 4..].to_vec();
+    if headers
+        .iter()
+        .any(|(n, v)| n == "transfer-encoding" && v.contains("chunked"))
+    {
+        body = dechunk(&body);
+    }
+    Response {
+        status,
+        headers,
+        body,
+    }
+}
+
+fn dechunk(mut raw: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    loop {
+        let line_end = raw.windows(2).position(|w| w == b"\r\n").unwrap();
+        let size = usize::from_str_radix(std::str::from_utf8(&raw[..line_end]).unwrap().trim(), 16)
+            .unwrap();
+        if size == 0 {
+            return out;
+        }
+        out.extend_from_slice(&raw[line_end + 2..line_end + 2 + size]);
+        raw = &raw[line_end + 2 + size + 2..];
+    }
+}
+
+fn is_png(bytes: &[u8]) -> bool {
+    bytes.starts_with(b"\x89PNG\r\n\x1a\n")
+}
+
+/// A binary STL's triangle count, checked against its length.
+fn stl_triangles(bytes: &[u8]) -> usize {
+    let n = u32::from_le_bytes(bytes[80..84].try_into().unwrap()) as usize;
+    assert_eq!(bytes.len(), 84 + 50 * n, "a binary STL's length");
+    n
+}
+
+#[test]
+fn every_endpoint_answers() {
+    let studio = Studio::start("endpoints", SMALL);
+    let page = studio.get("/");
+    assert_eq!(page.status, 200);
+    let html = String::from_utf8_lossy(&page.body);
+    assert!(html.contains("<title>moirecast studio</title>"));
+    // the page loads nothing from elsewhere
+    assert!(!html.contains("http://") && !html.contains("https://"));
+
+    let keys = studio.get("/api/keys").json();
+    assert_eq!(keys.as_array().unwrap().len(), moirecast_spec::keys().len());
+    assert_eq!(keys[0]["key"], "surface.kind");
+
+    let state = studio.get("/api/state").json();
+    assert_eq!(state["revision"], 1);
+    assert_eq!(state["values"]["layout"]["width"], 4.0);
+    assert_eq!(state["derived"]["N"], 8);
+    assert_eq!(studio.get("/api/spec").body, SMALL.as_bytes());
+
+    let profiles = studio.get("/api/profiles").json();
+    assert_eq!(profiles, serde_json::json!(["profiles/horse.png"]));
+
+    let frame = studio.get("/api/frame.png?tilt=2.5&size=64");
+    assert_eq!(frame.status, 200);
+    assert!(is_png(&frame.body));
+    let contrast: f64 = frame.header("x-contrast").unwrap().parse().unwrap();
+    assert!(contrast.is_finite() && contrast > 0.0, "{contrast}");
+    // a tilt along is traced through the mesh
+    let along = studio.get("/api/frame.png?along=3&size=32&lights=white");
+    assert_eq!(
+        along.status,
+        200,
+        "{}",
+        String::from_utf8_lossy(&along.body)
+    );
+    assert!(is_png(&along.body));
+    for bad in [
+        "tilt=91",
+        "size=5000",
+        "samples=0",
+        "lights=purple",
+        "tilt=x",
+    ] {
+        let r = studio.get(&format!("/api/frame.png?{bad}"));
+        assert_eq!(r.status, 400, "{bad}");
+    }
+
+    let report = studio.get("/api/report").json();
+    let checks = report["checks"].as_array().unwrap();
+    assert!(checks.len() > 10);
+    assert!(checks.iter().all(|c| c["passed"] == true), "{checks:?}");
+    let device = studio.get("/api/device.stl");
+    assert_eq!(device.status, 200);
+    assert_eq!(
+        stl_triangles(&device.body) as u64,
+        report["mesh"]["triangles"].as_u64().unwrap()
+    );
+
+    for part in ["top.stl", "bottom.stl", "device.stl"] {
+        let r = studio.get(&format!("/api/mold/{part}"));
+        assert_eq!(r.status, 200, "{part}");
+        assert!(stl_triangles(&r.body) > 100, "{part}");
+    }
+    // once built, the mold's checks are in the report
+    let report = studio.get("/api/report").json();
+    let mold_checks = report["mold"]["checks"].as_array().unwrap();
+    assert!(mold_checks.iter().any(|c| c["name"] == "mold-volumes-sum"));
+    assert!(mold_checks.iter().all(|c| c["passed"] == true));
+
+    let grid = studio.get("/api/explore").json();
+    let cells = grid["cells"].as_array().unwrap();
+    assert_eq!(cells.len(), 25);
+    let best = grid["best"].as_u64().unwrap() as usize;
+    assert!(cells[best]["contrast"].as_f64().unwrap() > 0.0);
+    let thumbnail = studio.get(grid["thumbnails"][best].as_str().unwrap());
+    assert_eq!(thumbnail.status, 200);
+    assert!(is_png(&thumbnail.body));
+    assert_eq!(studio.get("/api/explore/25.png").status, 404);
+
+    // an edit, then "Save spec" writes it back to the spec file
+    let edited = SMALL.replace("levels = 1.0", "levels = 2.0");
+    let put = studio.request("PUT", "/api/spec", edited.as_bytes());
+    assert_eq!(put.status, 200);
+    assert_eq!(put.json()["revision"], 2);
+    assert_eq!(put.json()["values"]["base"]["levels"], 2.0);
+    let saved = studio.request("POST", "/api/save", b"");
+    assert_eq!(saved.status, 200);
+    assert_eq!(
+        std::fs::read_to_string(studio.dir.join("design.toml")).unwrap(),
+        edited
+    );
+    assert_eq!(studio.get("/nothing-here").status, 404);
+}
+
+#[test]
+fn a_bad_spec_is_refused_by_key_and_the_last_good_design_stays() {
+    let studio = Studio::start("refusals", SMALL);
+    let bad = SMALL.replace("afov = 60.0", "afov = 200");
+    let r = studio.request("PUT", "/api/spec", bad.as_bytes());
+    assert_eq!(r.status, 422);
+    let error = &r.json()["errors"][0];
+    assert_eq!(error["key"], "lens.afov");
+    assert_eq!(error["value"], "200");
+    assert!(error["fix"].as_str().unwrap().len() > 5);
+    // worded as the command line words it
+    std::fs::write(studio.dir.join("bad.toml"), &bad).unwrap();
+    let cli = Command::new(env!("CARGO_BIN_EXE_moirecast"))
+        .args(["device", "--quiet", "-o"])
+        .arg(studio.dir.join("cli"))
+        .arg(studio.dir.join("bad.toml"))
+        .output()
+        .unwrap();
+    let cli_words = String::from_utf8_lossy(&cli.stderr);
+    let ours = error["cli"]
+        .as_str()
+        .unwrap()
+        .replace("design.toml", "bad.toml");
+    assert!(cli_words.contains(&ours), "{cli_words} vs {ours}");
+
+    // the last good design is kept
+    let state = studio.get("/api/state").json();
+    assert_eq!(state["revision"], 1);
+    assert_eq!(state["values"]["lens"]["afov"], 60.0);
+    assert_eq!(studio.get("/api/frame.png?size=32").status, 200);
+
+    // TOML that does not parse: refused, no key
+    let r = studio.request("PUT", "/api/spec", b"[layout\nwidth = ");
+    assert_eq!(r.status, 422);
+    assert!(r.json()["errors"][0]["key"].is_null());
+    // an unknown key is named
+    let r = studio.request(
+        "PUT",
+        "/api/spec",
+        format!("{SMALL}\n[extra]\nx = 1\n").as_bytes(),
+    );
+    assert_eq!(r.status, 422);
+    assert!(r.json()["errors"][0]["message"]
+        .as_str()
+        .unwrap()
+        .contains("extra"));
+}
+
+#[test]
+fn traversal_foreign_hosts_and_large_bodies_are_refused() {
+    let studio = Studio::start("safety", SMALL);
+    for path in [
+        "/../../../etc/passwd",
+        "/api/mold/..%2F..%2F..%2Fetc%2Fpasswd",
+        "/api/mold/../../Cargo.toml",
+        "/api/explore/..%2F0.png",
+        "/%2e%2e/%2e%2e/etc/passwd",
+        "/design.toml",
+        "/profiles/horse.png",
+    ] {
+        let r = studio.get(path);
+        assert!(r.status == 404 || r.status == 400, "{path}: {}", r.status);
+        assert!(!String::from_utf8_lossy(&r.body).contains("root:"));
+    }
+    for image in [
+        "../profiles/horse.png",
+        "/etc/hosts.png",
+        "profiles/../../x.png",
+    ] {
+        let text = SMALL.replace(
+            "[profile]\nkind = \"bump\"\nsigma = 1.5",
+            &format!("[profile]\nimage = {image:?}"),
+        );
+        let r = studio.request("PUT", "/api/spec", text.as_bytes());
+        assert_eq!(r.status, 422, "{image}");
+        assert_eq!(r.json()["errors"][0]["key"], "profile.image", "{image}");
+    }
+    // an image inside the spec's folder is fine
+    let text = SMALL.replace(
+        "[profile]\nkind = \"bump\"\nsigma = 1.5",
+        "[profile]\nimage = \"profiles/horse.png\"",
+    );
+    assert_eq!(
+        studio.request("PUT", "/api/spec", text.as_bytes()).status,
+        200
+    );
+
+    // DNS rebinding: another name for 127.0.0.1 is refused
+    for host in [
+        "evil.example",
+        &format!("evil.example:{}", studio.port),
+        "127.0.0.1:1",
+    ] {
+        let r = studio.request_as(host, "GET", "/api/state", b"");
+        assert_eq!(r.status, 403, "{host}");
+    }
+    assert_eq!(
+        studio
+            .request_as(
+                &format!("localhost:{}", studio.port),
+                "GET",
+                "/api/state",
+                b""
+            )
+            .status,
+        200
+    );
+
+    let big = vec![b'#'; moirecast::studio::MAX_BODY_BYTES + 1];
+    assert_eq!(studio.request("PUT", "/api/spec", &big).status, 413);
+    assert_eq!(studio.get("/api/state").json()["revision"], 2);
+    assert_eq!(
+        studio
+            .request("POST", "/api/write?what=everything", b"")
+            .status,
+        400
+    );
+}
+
+#[test]
+fn concurrent_frames_are_rendered_or_superseded() {
+    let studio = Studio::start("concurrent", SMALL);
+    let replies: Vec<(u16, Vec<u8>)> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..8)
+            .map(|i| {
+                let studio = &studio;
+                s.spawn(move || {
+                    let r = studio.get(&format!("/api/frame.png?size=96&tilt={}", i as f64 - 4.0));
+                    (r.status, r.body)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let rendered = replies.iter().filter(|(s, _)| *s == 200).count();
+    assert!(rendered >= 1);
+    for (status, body) in &replies {
+        match status {
+            200 => assert!(is_png(body)),
+            409 => assert!(String::from_utf8_lossy(body).contains("superseded")),
+            other => panic!("status {other}"),
+        }
+    }
+    // one at a time, every request is rendered, and the same view gives
+    // the same bytes
+    let a = studio.get("/api/frame.png?size=48&tilt=1");
+    let b = studio.get("/api/frame.png?size=48&tilt=1");
+    assert_eq!((a.status, b.status), (200, 200));
+    assert_eq!(a.body, b.body);
+}
+
+/// The file's bytes, or a panic naming it.
+fn read(path: &Path) -> Vec<u8> {
+    std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+#[test]
+fn a_write_gives_the_command_lines_bytes() {
+    let studio = Studio::start("write", SMALL);
+    let events = studio.events_until_finished(|| {
+        let r = studio.request("POST", "/api/write?what=device", b"");
+        assert_eq!(r.status, 202);
+    });
+    assert!(events.contains(r#""kind":"stage""#), "{events}");
+    assert!(events.contains(r#""kind":"done""#), "{events}");
+    let cli_out = studio.dir.join("cli");
+    let cli = Command::new(env!("CARGO_BIN_EXE_moirecast"))
+        .args(["device", "--quiet", "-o"])
+        .arg(&cli_out)
+        .arg(studio.dir.join("design.toml"))
+        .status()
+        .unwrap();
+    assert!(cli.success());
+    for file in ["device.stl", "device.step"] {
+        assert!(
+            read(&studio.dir.join("out").join(file)) == read(&cli_out.join(file)),
+            "{file} differs from the command line's"
+        );
+    }
+    // the mold, too
+    let events = studio.events_until_finished(|| {
+        assert_eq!(
+            studio.request("POST", "/api/write?what=mold", b"").status,
+            202
+        );
+    });
+    assert!(events.contains(r#""kind":"done""#), "{events}");
+    let cli = Command::new(env!("CARGO_BIN_EXE_moirecast"))
+        .args(["mold", "--quiet", "-o"])
+        .arg(&cli_out)
+        .arg(studio.dir.join("design.toml"))
+        .status()
+        .unwrap();
+    assert!(cli.success());
+    for file in ["mold-top.stl", "mold-bottom.stl", "assembly.scad"] {
+        assert!(
+            read(&studio.dir.join("out").join(file)) == read(&cli_out.join(file)),
+            "{file} differs from the command line's"
+        );
+    }
+}
