@@ -4,6 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
+pub mod http;
+
 /// The specs in `molds/`, sorted (at least the four the README lists).
 pub fn shipped_specs() -> Vec<std::path::PathBuf> {
     let mut specs: Vec<_> = std::fs::read_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/molds"))

@@ -1,0 +1,90 @@
+//! Benchmark of `moirecast studio` over HTTP, end to end, on the reference
+//! design (or SPEC): the latency of a 256 px frame (median and p95 over
+//! RUNS requests at different tilts, after one frame has built the
+//! sections), the latency of a 512 px frame, and the time from a spec edit
+//! (`PUT /api/spec`) to its first 256 px frame.
+//!
+//! `cargo bench --bench studio [-- SPEC [RUNS]]`
+
+mod common;
+#[path = "../tests/common/http.rs"]
+#[allow(dead_code)] // the tests use all of it
+mod http;
+
+use common::median;
+use std::time::Instant;
+
+/// The value below which `q` of `v` lie.
+fn quantile(mut v: Vec<f64>, q: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+fn main() {
+    let (spec_path, runs) = common::spec_and_runs(40);
+    common::print_header(&spec_path, runs);
+    let (sender, receiver) = std::sync::mpsc::channel();
+    let options = moirecast::studio::StudioOptions {
+        spec: Some(spec_path.clone().into()),
+        out: std::env::temp_dir().join(format!("moirecast-bench-studio-{}", std::process::id())),
+        host: "127.0.0.1".parse().unwrap(),
+        port: 0,
+    };
+    std::thread::spawn(move || {
+        moirecast::studio::run(options, |url| sender.send(url.to_string()).unwrap()).unwrap()
+    });
+    let url = receiver.recv().unwrap();
+    let port: u16 = url
+        .trim_end_matches('/')
+        .rsplit(':')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let host = format!("127.0.0.1:{port}");
+    let get = |target: &str| {
+        let t = Instant::now();
+        let r = http::request(port, &host, "GET", target, b"");
+        assert_eq!(
+            r.status,
+            200,
+            "{target}: {}",
+            String::from_utf8_lossy(&r.body)
+        );
+        (t.elapsed().as_secs_f64() * 1e3, r)
+    };
+    for size in [256, 512] {
+        get(&format!("/api/frame.png?size={size}&tilt=0"));
+        let (mut latency, mut render) = (Vec::new(), Vec::new());
+        for i in 0..runs {
+            let tilt = -10.0 + 20.0 * i as f64 / runs as f64;
+            let (ms, r) = get(&format!("/api/frame.png?size={size}&tilt={tilt}"));
+            latency.push(ms);
+            render.push(r.header("x-render-ms").unwrap().parse::<f64>().unwrap());
+        }
+        println!(
+            "frame {size} px      median {:6.1} ms, p95 {:6.1} ms over HTTP (render alone: median {:.1} ms)",
+            median(latency.clone()),
+            quantile(latency, 0.95),
+            median(render)
+        );
+    }
+    let original = String::from_utf8(get("/api/spec").1.body).unwrap();
+    let edits: Vec<f64> = (0..5)
+        .map(|i| {
+            // a new elevation amplitude: a new profile, sections and frame
+            let text = format!("{original}\n# edit {i}\n");
+            let text = text.replacen("levels = ", &format!("levels = 1.{i}{i} # was "), 1);
+            let t = Instant::now();
+            let put = http::request(port, &host, "PUT", "/api/spec", text.as_bytes());
+            assert_eq!(put.status, 200, "{}", String::from_utf8_lossy(&put.body));
+            get("/api/frame.png?size=256&tilt=2.5");
+            t.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    println!(
+        "edit to first frame  median {:6.1} ms over {} edits (PUT /api/spec, then a 256 px frame)",
+        median(edits),
+        5
+    );
+}
