@@ -37,17 +37,21 @@ fn main() {
         .collect();
     println!("scene (BVH)       {:8.1} ms", median(scene_t) * 1e3);
     let scene = Scene::new(&dm.mesh);
+    let rows = Sections::for_frame(design, 256).unwrap().rows();
     let section_t: Vec<f64> = (0..runs)
         .map(|_| {
             let t = Instant::now();
-            let sections = Sections::new(design, 2 * 256 + 1).unwrap();
+            let sections = Sections::for_frame(design, 256).unwrap();
             (0..sections.rows()).into_par_iter().for_each(|r| {
                 std::hint::black_box(sections.section(r));
             });
             t.elapsed().as_secs_f64()
         })
         .collect();
-    println!("sections (513 rows) {:6.1} ms", median(section_t) * 1e3);
+    println!(
+        "sections ({rows} rows, 256 px) {:6.1} ms",
+        median(section_t) * 1e3
+    );
     let integrators = [
         (
             "default: branching, 16 lens phases, sections",
@@ -72,7 +76,7 @@ fn main() {
         .into_iter()
         .flat_map(|s| integrators.map(|i| (s, i)))
     {
-        let sections = Sections::new(design, 2 * size + 1);
+        let sections = Sections::for_frame(design, size);
         let mut fid = (0.0, 0.0);
         let times: Vec<f64> = (0..runs)
             .map(|_| {

@@ -62,11 +62,11 @@ impl Tracer {
         }
     }
 
-    /// The sections of `design` to trace for frames of `size` pixels: a row
-    /// every half pixel or finer. `None` for the mesh tracer or a printed device.
+    /// The sections of `design` to trace for frames of `size` pixels
+    /// ([`Sections::for_frame`]). `None` for the mesh tracer or a printed device.
     pub fn sections<'d>(&self, design: &'d Design, size: usize) -> Option<Sections<'d>> {
         match self {
-            Tracer::Sections => Sections::new(design, 2 * size + 1),
+            Tracer::Sections => Sections::for_frame(design, size),
             Tracer::Mesh => None,
         }
     }

@@ -70,7 +70,7 @@ fn the_default_frame_agrees_with_the_path_tracer_on_every_shipped_spec() {
         let dm = mesh_device(design, &Silent).unwrap();
         let (mesh, absorbing) = traced_mesh(design, &dm).unwrap();
         let scene = Scene::with_absorbing(&mesh, absorbing);
-        let sections = Sections::new(design, 2 * SIZE + 1);
+        let sections = Sections::for_frame(design, SIZE);
         let frame = |integrator, sampling, seed, sections| {
             let view = View {
                 width: SIZE,
@@ -133,7 +133,7 @@ fn the_default_frame_has_no_noise_at_256_px() {
     for (name, design) in [("reference", &reference), ("dome", &dome)] {
         let dm = mesh_device(design, &Silent).unwrap();
         let scene = Scene::new(&dm.mesh);
-        let sections = Sections::new(design, 2 * 256 + 1);
+        let sections = Sections::for_frame(design, 256);
         let frame = |seed| {
             let view = View {
                 width: 256,

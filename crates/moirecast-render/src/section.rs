@@ -438,15 +438,36 @@ impl<'d> Sections<'d> {
         })
     }
 
+    /// The sections a frame of `size` × `size` pixels of `design` traces:
+    /// a station every lens period or every two pixels, whichever is
+    /// finer, but no finer than a pixel. Pixels interpolate between
+    /// stations as they do between lens centres, so a frame resolves the
+    /// layout's v as finely as its u, which the lenses sample once a
+    /// period (and at least every two pixels at large sizes). `None` for a
+    /// printed design.
+    pub fn for_frame(design: &'d Design, size: usize) -> Option<Self> {
+        let p = &design.params;
+        let pixel = p.width.max(p.height) / size.max(1) as f64;
+        let step = p.period.min(2.0 * pixel).max(pixel);
+        let rows = (2.0 * design.half_height / step).ceil() as usize + 1;
+        Self::new(design, rows)
+    }
+
     /// The design the sections cut.
     pub fn design(&self) -> &'d Design {
         self.design
     }
 
-    /// The row nearest station `v`, if `v` is on the layout.
-    pub fn row_near(&self, v: f64) -> Option<usize> {
-        let r = ((v - self.v0) / self.step).round();
-        (r >= 0.0 && (r as usize) < self.rows.len()).then_some(r as usize)
+    /// The row at or below station `v` and how far `v` is towards the next
+    /// row (0 to 1), if `v` is on the layout.
+    pub fn row_below(&self, v: f64) -> Option<(usize, f64)> {
+        let s = (v - self.v0) / self.step;
+        let last = self.rows.len() - 1;
+        if !(s >= 0.0 && s <= last as f64) {
+            return None;
+        }
+        let r = (s.floor() as usize).min(last - 1);
+        Some((r, s - r as f64))
     }
 
     /// How many rows.

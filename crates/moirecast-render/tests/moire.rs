@@ -92,7 +92,7 @@ fn traced_frame(
     let dm = mesh_device(device, &Silent).unwrap();
     let (mesh, absorbing) = traced_mesh(device, &dm).unwrap();
     // the default: a dual-lens device's exact sections where they apply
-    let sections = Sections::new(device, 2 * 128 + 1);
+    let sections = Sections::for_frame(device, 128);
     render_traced(
         phase_of,
         &Scene::with_absorbing(&mesh, absorbing),
