@@ -1,8 +1,9 @@
 //! Benchmark of `moirecast studio` over HTTP, end to end, on the reference
 //! design (or SPEC): the latency of a 256 px frame (median and p95 over
-//! RUNS requests at different tilts, after one frame has built the
-//! sections), the latency of a 512 px frame, and the time from a spec edit
-//! (`PUT /api/spec`) to its first 256 px frame.
+//! RUNS requests at tilts across ±10°, after one frame has built the
+//! sections) with the default 16 lens phases and with the 9 the page asks
+//! for while a slider moves, of a 512 px frame, and the time from a spec
+//! edit (`PUT /api/spec`) to its first 256 px frame.
 //!
 //! `cargo bench --bench studio [-- SPEC [RUNS]]`
 
@@ -53,17 +54,22 @@ fn main() {
         );
         (t.elapsed().as_secs_f64() * 1e3, r)
     };
-    for size in [256, 512] {
+    // the default (16 lens phases), and what the page asks for while a
+    // slider moves (9)
+    for (size, samples) in [(256, 4), (256, 3), (512, 4)] {
         get(&format!("/api/frame.png?size={size}&tilt=0"));
         let (mut latency, mut render) = (Vec::new(), Vec::new());
         for i in 0..runs {
             let tilt = -10.0 + 20.0 * i as f64 / runs as f64;
-            let (ms, r) = get(&format!("/api/frame.png?size={size}&tilt={tilt}"));
+            let (ms, r) = get(&format!(
+                "/api/frame.png?size={size}&samples={samples}&tilt={tilt}"
+            ));
             latency.push(ms);
             render.push(r.header("x-render-ms").unwrap().parse::<f64>().unwrap());
         }
         println!(
-            "frame {size} px      median {:6.1} ms, p95 {:6.1} ms over HTTP (render alone: median {:.1} ms)",
+            "frame {size} px, {:2} phases  median {:6.1} ms, p95 {:6.1} ms over HTTP (render alone: median {:.1} ms)",
+            samples * samples,
             median(latency.clone()),
             quantile(latency, 0.95),
             median(render)
