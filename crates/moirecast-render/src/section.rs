@@ -120,6 +120,10 @@ impl Arc2 {
     }
 }
 
+/// Base creases a section adds beyond the layout's edge, at most, to reach
+/// a wall (a base that ends this many periods inside its wall would fold).
+const MAX_EXTRA_CREASES: usize = 64;
+
 /// Arcs per block of an [`ArcRow`].
 const BLOCK: usize = 8;
 
@@ -296,17 +300,47 @@ impl Section {
         // in the plane y = v (0.2 mm off at the reference saddle's edge,
         // where the level lines move with v). Each crease is taken at the
         // station that puts it in the plane.
+        let crease =
+            |k: i64, (u, mut station): (Option<f64>, f64)| -> Result<(f64, f64), KernelError> {
+                let mut u = u;
+                for _ in 0..3 {
+                    let solved = design.base_crease_u_near(k, station, u)?;
+                    station -= design.base_surface(solved, station).y - v;
+                    u = Some(solved);
+                }
+                Ok((design.base_crease_u_near(k, station, u)?, station))
+            };
         let mut creases: Vec<(f64, f64)> = Vec::with_capacity((last - first + 1).max(0) as usize);
         for k in first..=last {
-            let (mut u, mut station) = creases
+            let near = creases
                 .last()
                 .map_or((None, v), |&(u, s)| (Some(u + period), s));
-            for _ in 0..3 {
-                let solved = design.base_crease_u_near(k, station, u)?;
-                station -= design.base_surface(solved, station).y - v;
-                u = Some(solved);
+            creases.push(crease(k, near)?);
+        }
+        // The walls are vertical over the layout's edge, and the base,
+        // below f along the normal, may end inside them (where the surface
+        // slopes down towards a wall): the base arcs go on until they reach
+        // each wall, as the mesh's base does before the walls trim it.
+        let base_x = |(u, station): (f64, f64)| design.base_surface(u, station).x;
+        let x_of = |u: f64| design.surface().point(u, v).x;
+        let walls = (x_of(-hw), x_of(hw));
+        let (mut k0, mut k1) = (first, last);
+        for _ in 0..MAX_EXTRA_CREASES {
+            let (Some(&a), Some(&b)) = (creases.first(), creases.last()) else {
+                break;
+            };
+            let (left, right) = (base_x(a) > walls.0, base_x(b) < walls.1);
+            if !(left || right) {
+                break;
             }
-            creases.push((design.base_crease_u_near(k, station, u)?, station));
+            if left {
+                k0 -= 1;
+                creases.insert(0, crease(k0, (Some(a.0 - period), a.1))?);
+            }
+            if right {
+                k1 += 1;
+                creases.push(crease(k1, (Some(b.0 + period), b.1))?);
+            }
         }
         let rule = ArcRule::ConstantAfov {
             half_angle: design.base_arc_between(-hw, -hw + period, v).half_angle,
@@ -321,7 +355,6 @@ impl Section {
             })
             .collect();
         let (top, base) = (ArcRow::new(top), ArcRow::new(base));
-        let x_of = |u: f64| design.surface().point(u, v).x;
         let (t, b) = (top.z_extent(), base.z_extent());
         // a wall runs from the base arc under it up to the revealer's crease
         let wall_z = |u: f64| {
@@ -334,7 +367,7 @@ impl Section {
             (bottom.min(top_z), bottom.max(top_z))
         };
         Ok(Section {
-            walls: (x_of(-hw), x_of(hw)),
+            walls,
             wall_z: [wall_z(-hw), wall_z(hw)],
             z: (t.0.min(b.0), t.1.max(b.1)),
             top,
@@ -551,6 +584,31 @@ mod tests {
         let from = DVec3::new(-d.params.width, 0.3, across.z);
         let enters = s.meet(Side::Outside, from, DVec3::X, 0.0).unwrap();
         assert!((enters.t - d.params.width / 2.0).abs() < 1e-12);
+    }
+
+    /// Where the surface slopes down towards a wall, the base (below f
+    /// along the normal) ends inside the wall at the layout's edge; the
+    /// section's base goes on to each wall, as the mesh's does, so a ray
+    /// down beside the wall meets the base and does not fall through.
+    #[test]
+    fn the_base_reaches_both_walls_where_the_surface_slopes_away() {
+        let mut p =
+            DesignParams::with_defaults(PitchSurface::Cylinder { radius: 50.0 }, 50.0, 4.0, 0.5);
+        p.profile = Profile::Rings { wavelength: 10.0 };
+        let d = Design::new(p).unwrap();
+        let s = Section::new(&d, 0.0).unwrap();
+        let hw = d.params.width / 2.0;
+        // the base at the layout's edge is well inside the wall
+        assert!(d.base_surface(-hw, 0.0).x > s.walls.0 + d.params.period);
+        assert!(d.base_surface(hw, 0.0).x < s.walls.1 - d.params.period);
+        let (first, last) = (s.base.arcs[0], *s.base.arcs.last().unwrap());
+        assert!(first.x.0 <= s.walls.0 && last.x.1 >= s.walls.1);
+        for x in [s.walls.0 + 1e-3, s.walls.1 - 1e-3] {
+            let top = s.top.arcs.iter().find_map(|a| a.z_at(x)).unwrap();
+            let from = DVec3::new(x, 0.0, top - 1e-3);
+            let hit = s.meet(Side::Inside, from, DVec3::NEG_Z, 0.0).unwrap();
+            assert!(hit.normal.z < 0.0, "{x}: {hit:?}");
+        }
     }
 
     /// Through a section, as through the mesh, the branches conserve the
