@@ -500,15 +500,50 @@ fn lattice_pixels(
         }
         Some((colour / phases as f64, dropped / phases as f64))
     };
-    // Each lens's needed rows, and on the rows traced first, the lenses:
-    // within every ROW_STRIDE of them, the first is traced, then the middle
-    // one, then the quarters. A cell is interpolated from the two traced
-    // around it where those agree within ROW_AGREEMENT, or where the middle
-    // one lies within MIDPOINT_RESIDUAL of the line through them (a smooth
-    // ramp), and traced otherwise (a level line between).
+    let cells = traced_or_interpolated(&needed, columns, &|r, c| trace_cell(r, c as i64 - 1));
+    let levels = design.params.base.levels;
+    seen.into_iter()
+        .map(|s| {
+            let Seen { r, wr, i, w, u, v } = s?;
+            // bilinear in (lens, station)
+            let across = |r: usize| -> Option<(DVec3, f64)> {
+                let ((c0, d0), (c1, d1)) = (cells[cell(r, i)]?, cells[cell(r, i + 1)]?);
+                Some((c0.lerp(c1, w), d0 + w * (d1 - d0)))
+            };
+            let ((c0, d0), (c1, d1)) = (across(r)?, across(r + 1)?);
+            let on_top = u.abs() <= hw && v.abs() <= design.half_height;
+            let phase = if on_top {
+                (levels * design.params.profile.value(u, v)).rem_euclid(1.0)
+            } else {
+                f64::NAN
+            };
+            Some((c0.lerp(c1, wr), phase, d0 + wr * (d1 - d0)))
+        })
+        .collect()
+}
+
+/// How [`lattice_pixels`] traces one ray of a cell through the cell's
+/// section: its colour and dropped weight.
+type CellTrace<'a> = dyn Fn((DVec3, DVec3), &Section) -> (DVec3, f64) + Sync + 'a;
+
+/// The cells of a lattice of `columns` lenses: those `needed` (row-major),
+/// each traced by `trace(row, column)` or interpolated between traced ones.
+///
+/// Of each lens's needed rows, and of the lenses on the rows traced first,
+/// within every ROW_STRIDE the first is traced, then the middle one, then
+/// the quarters. A cell is interpolated from the two traced
+/// around it where those agree within ROW_AGREEMENT, or where the middle
+/// one lies within MIDPOINT_RESIDUAL of the line through them (a smooth
+/// ramp), and traced otherwise (a level line between).
+fn traced_or_interpolated(
+    needed: &[bool],
+    columns: usize,
+    trace: &(dyn Fn(usize, usize) -> Option<Cell> + Sync),
+) -> Vec<Option<Cell>> {
+    // each lens's needed rows
     let rows_of: Vec<Vec<usize>> = (0..columns)
         .map(|c| {
-            (0..sections.rows())
+            (0..needed.len() / columns)
                 .filter(|&r| needed[r * columns + c])
                 .collect()
         })
@@ -565,7 +600,7 @@ fn lattice_pixels(
                         let value = (lens_class > 0)
                             .then(|| predict(at(ca), at(cb), middle, c as f64))
                             .flatten();
-                        let value = value.or_else(|| trace_cell(r, c as i64 - 1));
+                        let value = value.or_else(|| trace(r, c));
                         (at_column(r, c), value)
                     })
             })
@@ -590,7 +625,7 @@ fn lattice_pixels(
                         let (kb, km) = ((ka + ROW_STRIDE).min(n - 1), ka + ROW_STRIDE / 2);
                         let middle = (row_class == 2 && km < kb).then(|| at(km));
                         let value = predict(at(ka), at(kb), middle, r as f64);
-                        let value = value.or_else(|| trace_cell(r, c as i64 - 1));
+                        let value = value.or_else(|| trace(r, c));
                         (at_column(r, c), value)
                     })
             })
@@ -599,30 +634,8 @@ fn lattice_pixels(
             cells[c] = value;
         }
     }
-    let levels = design.params.base.levels;
-    seen.into_iter()
-        .map(|s| {
-            let Seen { r, wr, i, w, u, v } = s?;
-            // bilinear in (lens, station)
-            let across = |r: usize| -> Option<(DVec3, f64)> {
-                let ((c0, d0), (c1, d1)) = (cells[cell(r, i)]?, cells[cell(r, i + 1)]?);
-                Some((c0.lerp(c1, w), d0 + w * (d1 - d0)))
-            };
-            let ((c0, d0), (c1, d1)) = (across(r)?, across(r + 1)?);
-            let on_top = u.abs() <= hw && v.abs() <= design.half_height;
-            let phase = if on_top {
-                (levels * design.params.profile.value(u, v)).rem_euclid(1.0)
-            } else {
-                f64::NAN
-            };
-            Some((c0.lerp(c1, wr), phase, d0 + wr * (d1 - d0)))
-        })
-        .collect()
+    cells
 }
-
-/// How [`lattice_pixels`] traces one ray of a cell through the cell's
-/// section: its colour and dropped weight.
-type CellTrace<'a> = dyn Fn((DVec3, DVec3), &Section) -> (DVec3, f64) + Sync + 'a;
 
 /// What a pixel of [`lattice_pixels`] sees: the section rows around its
 /// station (`r`, `r + 1`, a fraction `wr` of the way), the lenses around
