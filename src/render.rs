@@ -302,8 +302,13 @@ pub fn run_render(
             reach.ceil()
         );
     }
-    let scene = Scene::with_absorbing(&mesh, absorbing);
     let sections = options.tracer.sections(design, options.size);
+    // Frames the sections trace whole need no BVH: an empty scene frames
+    // them as the mesh would.
+    let scene = match sections.as_ref() {
+        Some(_) if options.sections_trace_every_frame() => Scene::framing((lo, hi)),
+        _ => Scene::with_absorbing(&mesh, absorbing),
+    };
     let mut files = OutputSet::new();
     let (mut images, mut reports) = (Vec::new(), Vec::new());
     let mut period_px = 0.0;

@@ -402,14 +402,13 @@ pub fn layout_on_ray(
 /// meets, and the weight the branching integrator dropped.
 type RaySample = (DVec3, Option<(DVec3, DVec3)>, f64);
 
-/// Lenses next to each wall whose pixels [`lattice_pixels`] leaves to the
-/// mesh: the sections' walls are vertical segments, the mesh's are what is
-/// printed, and a ray through the outermost lenses can meet one. (Tracing
-/// those lenses' cells through the mesh instead, interpolated like the
-/// others, takes 40 ms less of a 256 px frame of the reference but costs
-/// the plane's agreement with the path tracer 0.005, to 0.9786; tracing
-/// them through the sections, 0.005 too, to 0.9783, and the paraboloid's
-/// agreement with the mesh falls to 0.9798.)
+/// Lenses next to each wall whose pixels [`lattice_pixels`] leaves to be
+/// traced pixel by pixel, each through its own lens-period window, as the
+/// path tracer's square pixel sees the device's silhouette: through the
+/// mesh where there is one (it has the walls as printed), else through
+/// the sections. (Interpolating those lenses' cells like the others
+/// instead costs the plane's agreement with the path tracer 0.005, to
+/// 0.978, whether the cells are traced through the mesh or the sections.)
 const WALL_LENSES: i64 = 1;
 
 /// Of each lens's rows, and of the lenses on those rows, every this many
@@ -440,19 +439,18 @@ type Cell = (DVec3, f64);
 /// pixels per lens or fewer). So each (lens, section row) cell is traced
 /// once, through its `phases` fixed lens phases, and a pixel interpolates
 /// the two lenses nearest the layout point it sees and the two stations
-/// nearest it, bilinearly. Pixels within `wall_lenses` of a wall are left
-/// to the mesh, which has the walls as printed (none without a mesh: the
-/// outermost lenses then stand for the half lens beyond their centres).
+/// nearest it, bilinearly. Pixels within [`WALL_LENSES`] of a wall are
+/// left to be traced pixel by pixel.
 fn lattice_pixels(
     design: &Design,
     sections: &Sections,
     shot: &Shot,
-    (phases, wall_lenses): (usize, i64),
+    phases: usize,
     trace: &CellTrace<'_>,
 ) -> Vec<Option<(DVec3, f64, f64)>> {
     let (t, hw) = (design.params.period, design.params.width / 2.0);
     let lenses = design.lenses as i64;
-    // lenses −1 ..= N: one beyond each wall, seen past the device's edge
+    // lenses −1 ..= N (cells are indexed from the one beyond each wall)
     let columns = lenses.max(0) as usize + 2;
     // per pixel: (row below, weight of the row above, lens below, weight
     // of the lens above, u, v)
@@ -466,13 +464,7 @@ fn lattice_pixels(
             let (r, wr) = sections.row_below(v)?;
             let s = (u + hw) / t - 0.5;
             let (i, w) = (s.floor() as i64, s - s.floor());
-            // with no lenses left to the mesh, the lenses beyond the walls
-            // are traced too (their rays meet a wall, or miss the device)
-            let (first, last) = match wall_lenses {
-                0 => (-1, lenses),
-                n => (n, lenses - 1 - n),
-            };
-            let clear_of_walls = i >= first && i < last;
+            let clear_of_walls = i >= WALL_LENSES && i < lenses - 1 - WALL_LENSES;
             let built = sections.section(r).is_some() && sections.section(r + 1).is_some();
             (clear_of_walls && built).then_some(Seen { r, wr, i, w, u, v })
         })
@@ -709,6 +701,32 @@ pub fn render_traced(
     };
     // the layout point the pixel's centre sees, and rays through the pitch
     // surface at fixed lens phases across the period centred on it
+    // the sections the view lets the branching integrator trace, if any
+    let traced_sections = match (view.integrator, view.sampling, sections) {
+        (Integrator::Branching(pruning), Sampling::LensPeriod(_), Some(sections))
+            if view.camera == Camera::Orthographic && view.tilt_along == 0.0 =>
+        {
+            Some((sections, pruning))
+        }
+        _ => None,
+    };
+    // Without a mesh, the pixels the lattice leaves (the outermost lenses')
+    // trace their own lens-period windows through the sections around
+    // their station, bilinearly as the lattice's cells are: `None` where
+    // the sections do not reach. (With a mesh, through the mesh: the
+    // dome's frame agrees with the mesh tracer's 0.9810 so, 0.9798 through
+    // the sections.)
+    let through_sections = |(origin, d): (DVec3, DVec3), v: f64| -> Option<(DVec3, f64)> {
+        let (sections, pruning) = traced_sections.filter(|_| scene.is_empty())?;
+        let (r, wr) = sections.row_below(v)?;
+        let (a, b) = (sections.section(r)?, sections.section(r + 1)?);
+        let a = trace_branches(a, index, origin, d, &colour_of, pruning);
+        let b = trace_branches(b, index, origin, d, &colour_of, pruning);
+        Some((
+            a.colour.lerp(b.colour, wr),
+            a.dropped + wr * (b.dropped - a.dropped),
+        ))
+    };
     let lens_period = |px: usize, py: usize, k: usize, rng: &mut SplitMix64| {
         let target = shot.target(px as f64 + 0.5, py as f64 + 0.5);
         let (origin, d) = shot.ray_through(target);
@@ -723,24 +741,24 @@ pub fn render_traced(
             if s < start {
                 s += 1.0;
             }
-            let point = design.surface().point(s * t - hw, v);
-            let (colour, _, dr) = trace(shot.ray_through(point), rng);
+            let ray = shot.ray_through(design.surface().point(s * t - hw, v));
+            let (colour, dr) = through_sections(ray, v).unwrap_or_else(|| {
+                let (colour, _, dr) = trace(ray, rng);
+                (colour, dr)
+            });
             (sum, dropped) = (sum + colour, dropped + dr);
         }
         let on_top = u.abs() <= hw && v.abs() <= design.half_height;
         let phase = if on_top { phase_at(u, v) } else { f64::NAN };
         Some((sum / k as f64, phase, dropped / k as f64))
     };
-    let lattice = match (view.integrator, view.sampling, sections) {
-        (Integrator::Branching(pruning), Sampling::LensPeriod(k), Some(sections))
-            if view.camera == Camera::Orthographic && view.tilt_along == 0.0 =>
-        {
+    let lattice = match (traced_sections, view.sampling) {
+        (Some((sections, pruning)), Sampling::LensPeriod(k)) => {
             let trace = |(origin, d): (DVec3, DVec3), section: &Section| {
                 let b = trace_branches(section, index, origin, d, &colour_of, pruning);
                 (b.colour, b.dropped)
             };
-            let wall_lenses = if scene.is_empty() { 0 } else { WALL_LENSES };
-            lattice_pixels(design, sections, &shot, (k.max(1), wall_lenses), &trace)
+            lattice_pixels(design, sections, &shot, k.max(1), &trace)
         }
         _ => Vec::new(),
     };
@@ -759,10 +777,30 @@ pub fn render_traced(
             }
         }
     };
+    let (rgb, phase, dropped) = paint(width, height, &pixel_of);
+    Frame {
+        width,
+        height,
+        signal: rgb.iter().map(|&c| lighting.signal(c)).collect(),
+        rgb,
+        phase,
+        period_px: design.params.period / shot.pixel,
+        dropped_weight: dropped.iter().sum::<f64>() / dropped.len().max(1) as f64,
+    }
+}
+
+/// Every pixel of a `width` × `height` frame, by `pixel_of(x, y)`: its
+/// colour, phase and dropped weight. Bands of TILE rows in parallel, each
+/// traced tile by tile, written in place.
+#[allow(clippy::type_complexity)]
+fn paint(
+    width: usize,
+    height: usize,
+    pixel_of: &(dyn Fn(usize, usize) -> (DVec3, f64, f64) + Sync),
+) -> (Vec<DVec3>, Vec<f64>, Vec<f64>) {
     let mut rgb = vec![DVec3::ZERO; width * height];
     let mut phase = vec![f64::NAN; width * height];
     let mut dropped = vec![0.0; width * height];
-    // bands of TILE rows in parallel, each traced tile by tile, written in place
     let band = (width * TILE).max(1);
     rgb.par_chunks_mut(band)
         .zip(phase.par_chunks_mut(band))
@@ -781,15 +819,7 @@ pub fn render_traced(
                 }
             }
         });
-    Frame {
-        width,
-        height,
-        signal: rgb.iter().map(|&c| lighting.signal(c)).collect(),
-        rgb,
-        phase,
-        period_px: design.params.period / shot.pixel,
-        dropped_weight: dropped.iter().sum::<f64>() / dropped.len().max(1) as f64,
-    }
+    (rgb, phase, dropped)
 }
 
 /// [`render_traced`] and the frame's [`crate::fidelity()`].
