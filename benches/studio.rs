@@ -24,24 +24,8 @@ fn quantile(mut v: Vec<f64>, q: f64) -> f64 {
 fn main() {
     let (spec_path, runs) = common::spec_and_runs(40);
     common::print_header(&spec_path, runs);
-    let (sender, receiver) = std::sync::mpsc::channel();
-    let options = moirecast::studio::StudioOptions {
-        spec: Some(spec_path.clone().into()),
-        out: std::env::temp_dir().join(format!("moirecast-bench-studio-{}", std::process::id())),
-        host: "127.0.0.1".parse().unwrap(),
-        port: 0,
-    };
-    std::thread::spawn(move || {
-        moirecast::studio::run(options, |url| sender.send(url.to_string()).unwrap()).unwrap()
-    });
-    let url = receiver.recv().unwrap();
-    let port: u16 = url
-        .trim_end_matches('/')
-        .rsplit(':')
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap();
+    let out = std::env::temp_dir().join(format!("moirecast-bench-studio-{}", std::process::id()));
+    let port = http::start_studio(spec_path.clone().into(), out);
     let host = format!("127.0.0.1:{port}");
     let get = |target: &str| {
         let t = Instant::now();

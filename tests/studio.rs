@@ -28,24 +28,7 @@ impl Studio {
             dir.join("profiles/horse.png"),
         )
         .unwrap();
-        let (sender, receiver) = std::sync::mpsc::channel();
-        let options = moirecast::studio::StudioOptions {
-            spec: Some(dir.join("design.toml")),
-            out: dir.join("out"),
-            host: "127.0.0.1".parse().unwrap(),
-            port: 0,
-        };
-        std::thread::spawn(move || {
-            moirecast::studio::run(options, |url| sender.send(url.to_string()).unwrap()).unwrap()
-        });
-        let url = receiver.recv().unwrap();
-        let port = url
-            .trim_end_matches('/')
-            .rsplit(':')
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap();
+        let port = http::start_studio(dir.join("design.toml"), dir.join("out"));
         Studio { port, dir }
     }
 

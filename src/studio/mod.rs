@@ -68,15 +68,19 @@ enum Home {
     Embedded,
 }
 
+/// Something built from a revision once: it, or the error as the command
+/// line words it.
+type Built<T> = OnceLock<Result<Arc<T>, String>>;
+
 /// One accepted spec and everything derived from it, built on demand.
 pub struct Revision {
     pub number: u64,
     pub text: String,
     pub spec: Arc<Spec>,
     frames: Frames,
-    device: OnceLock<Result<Arc<DeviceView>, String>>,
-    mold: OnceLock<Result<Arc<MoldView>, String>>,
-    explore: OnceLock<Result<Arc<ExploreView>, String>>,
+    device: Built<DeviceView>,
+    mold: Built<MoldView>,
+    explore: Built<ExploreView>,
 }
 
 impl Revision {
@@ -95,38 +99,28 @@ impl Revision {
 
     /// The device's mesh, STL and report (built once, on a blocking thread).
     async fn device(self: &Arc<Self>) -> Result<Arc<DeviceView>, String> {
-        let rev = self.clone();
-        blocking(move || {
-            rev.device
-                .get_or_init(|| {
-                    DeviceView::build(&rev.spec)
-                        .map(Arc::new)
-                        .map_err(cli_words)
-                })
-                .clone()
-        })
-        .await
+        self.cached(|rev| &rev.device, DeviceView::build).await
     }
 
     async fn mold(self: &Arc<Self>) -> Result<Arc<MoldView>, String> {
-        let rev = self.clone();
-        blocking(move || {
-            rev.mold
-                .get_or_init(|| MoldView::build(&rev.spec).map(Arc::new).map_err(cli_words))
-                .clone()
-        })
-        .await
+        self.cached(|rev| &rev.mold, MoldView::build).await
     }
 
     async fn explore(self: &Arc<Self>) -> Result<Arc<ExploreView>, String> {
+        self.cached(|rev| &rev.explore, ExploreView::build).await
+    }
+
+    /// What `build` makes of the spec, built once into the revision's
+    /// `cell`, on tokio's blocking pool; errors in the command line's words.
+    async fn cached<T: Send + Sync + 'static>(
+        self: &Arc<Self>,
+        cell: fn(&Revision) -> &Built<T>,
+        build: fn(&Spec) -> anyhow::Result<T>,
+    ) -> Result<Arc<T>, String> {
         let rev = self.clone();
         blocking(move || {
-            rev.explore
-                .get_or_init(|| {
-                    ExploreView::build(&rev.spec)
-                        .map(Arc::new)
-                        .map_err(cli_words)
-                })
+            cell(&rev)
+                .get_or_init(|| build(&rev.spec).map(Arc::new).map_err(cli_words))
                 .clone()
         })
         .await

@@ -29,6 +29,28 @@ impl Response {
     }
 }
 
+/// Starts `moirecast studio` on a free loopback port, serving from its own
+/// thread; returns the port.
+pub fn start_studio(spec: std::path::PathBuf, out: std::path::PathBuf) -> u16 {
+    let (sender, receiver) = std::sync::mpsc::channel();
+    let options = moirecast::studio::StudioOptions {
+        spec: Some(spec),
+        out,
+        host: "127.0.0.1".parse().unwrap(),
+        port: 0,
+    };
+    std::thread::spawn(move || {
+        moirecast::studio::run(options, |url| sender.send(url.to_string()).unwrap()).unwrap()
+    });
+    let url = receiver.recv().unwrap();
+    url.trim_end_matches('/')
+        .rsplit(':')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
 /// `method target` with `body` to 127.0.0.1:`port`, with `Host: host`.
 pub fn request(port: u16, host: &str, method: &str, target: &str, body: &[u8]) -> Response {
     let mut stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
