@@ -5,7 +5,7 @@
 
 use crate::error::{MoldError, MoldParam, Result};
 use crate::params::{MoldParams, MIN_WALL_MM};
-use crate::parting::{HeightQuery, PosedDevice, Rect, Wall, WallCurves};
+use crate::parting::{HeightQuery, Polyline, PosedDevice, Rect, Wall, WallCurves};
 use glam::{DVec2, DVec3};
 use moirecast_kernel::Design;
 
@@ -16,6 +16,9 @@ const GATE_EDGE_GAP_MM: f64 = 0.05;
 /// How far (mm) the runner reaches into the cavity, so the two touch in a
 /// volume, not along a face.
 const RUNNER_INTO_CAVITY_MM: f64 = 0.02;
+/// How far (mm) the sprue reaches below the lowest point of the skirt
+/// under it, so that it opens through the parting surface in one disk.
+const SPRUE_BELOW_SKIRT_MM: f64 = 0.05;
 
 /// The gate on the device's wall at the parting line, the runner that feeds
 /// it and the sprue above the runner's far end.
@@ -89,6 +92,23 @@ fn misfit(
         at,
         problem,
         fix,
+    }
+}
+
+/// The sprue's bottom: the runner's floor, or lower where the skirt under
+/// the sprue dips below that floor. The skirt carries the gate wall's
+/// mid-wall curve `mid` outward, so under the sprue (radius `r_s`, at `t_g`
+/// along the wall) it ripples with the lenses it crossed; a sprue that
+/// ended above a dip would open through the parting surface in two or
+/// more pieces, each a through-hole of the top half (found by the design
+/// fuzzer: tests/design-corpus/found-6252d5411ebc9c63.toml).
+fn sprue_bottom_z(mid: &Polyline, t_g: f64, (r_g, r_s): (f64, f64), m_g: f64) -> f64 {
+    let (skirt_low, _) = mid.range(t_g - r_s, t_g + r_s);
+    let runner_floor = m_g - r_g;
+    if skirt_low > runner_floor {
+        runner_floor
+    } else {
+        skirt_low - SPRUE_BELOW_SKIRT_MM
     }
 }
 
@@ -487,7 +507,7 @@ impl Site<'_> {
             radius: r_g,
             sprue_axis,
             sprue_radius: r_s,
-            sprue_bottom_z: m_g - r_g,
+            sprue_bottom_z: sprue_bottom_z(&wc.mid, t_g, (r_g, r_s), m_g),
             cone_radius: r_c,
             cone_depth: p.pour_cone_depth,
         })
