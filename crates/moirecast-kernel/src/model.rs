@@ -3,7 +3,7 @@
 //! to floating-point round-off and the convergence of its root finder.
 
 use crate::design::{BaseKind, Design};
-use crate::error::Result;
+use crate::error::{KernelError, Result};
 use crate::lens::LensArc;
 use crate::solve::bracketed_newton;
 use glam::DVec3;
@@ -115,7 +115,11 @@ impl Design {
 
     /// Layout u of base crease k at station v: the root of φ(u, v) =
     /// [`crease_phase`](Self::crease_phase)(k). φ increases with u
-    /// (validated), and E ∈ [0, A·T] brackets the root.
+    /// (validated), and on the layout E ∈ [0, A·T] brackets the root.
+    /// Beyond it, where a deep base on a sloping surface reaches (METHOD
+    /// §5: the arrays are built over an extended layout), a ramp profile
+    /// runs on past [0, 1]; there the bracket is widened until it holds
+    /// the root.
     pub fn base_crease_u(&self, k: i64, v: f64) -> Result<f64> {
         self.base_crease_u_near(k, v, None)
     }
@@ -137,14 +141,26 @@ impl Design {
             (u - u0 - a_t * e, 1.0 - a_t * grad.x)
         };
         let x0 = start.unwrap_or_else(|| u0 + a_t * profile.value(u0, v));
-        bracketed_newton(
-            u0 - 0.5 * a_t,
-            u0 + 1.5 * a_t,
-            x0,
-            1e-13,
-            &|| format!("base crease {k} at v = {v}"),
-            g,
-        )
+        let what = || format!("base crease {k} at v = {v}");
+        let (lo, hi) = (u0 - 0.5 * a_t, u0 + 1.5 * a_t);
+        bracketed_newton(lo, hi, x0, 1e-13, &what, g).or_else(|_| {
+            // g increases with u: step each end outward, doubling, until
+            // g changes sign between them
+            let widened = |mut end: f64, outward: f64, wrong_side: &dyn Fn(f64) -> bool| {
+                let mut step = a_t;
+                for _ in 0..64 {
+                    if !wrong_side(g(end).0) {
+                        return Ok(end);
+                    }
+                    end += outward * step;
+                    step *= 2.0;
+                }
+                Err(KernelError::Solver(what()))
+            };
+            let lo = widened(lo, -1.0, &|g| g > 0.0)?;
+            let hi = widened(hi, 1.0, &|g| g < 0.0)?;
+            bracketed_newton(lo, hi, x0, 1e-13, &what, g)
+        })
     }
 
     /// Base crease curve C_k(v) = s(u_k(v), v).

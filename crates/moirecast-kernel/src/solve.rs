@@ -9,7 +9,9 @@ const MAX_ITER: usize = 60;
 
 /// Solves g(x) = 0 for a g with g' > 0 on the bracket [lo, hi], where
 /// g(lo) ≤ 0 ≤ g(hi). Newton steps with analytic derivative, falling back to
-/// bisection when a step leaves the bracket: always converges.
+/// bisection when a step leaves the bracket: always converges. A bracket
+/// that holds no root (g of one sign at every point tried, so the bracket
+/// shrank onto one of its ends) is an error, not that end.
 pub fn bracketed_newton(
     mut lo: f64,
     mut hi: f64,
@@ -19,15 +21,16 @@ pub fn bracketed_newton(
     g: impl Fn(f64) -> (f64, f64),
 ) -> Result<f64> {
     let mut x = x0.clamp(lo, hi);
+    let (mut below, mut above) = (false, false);
     for _ in 0..200 {
         let (gx, dg) = g(x);
         if gx.abs() <= residual {
             return Ok(x);
         }
         if gx < 0.0 {
-            lo = x;
+            (lo, below) = (x, true);
         } else {
-            hi = x;
+            (hi, above) = (x, true);
         }
         let step = x - gx / dg;
         x = if dg > 0.0 && step > lo && step < hi {
@@ -36,7 +39,10 @@ pub fn bracketed_newton(
             0.5 * (lo + hi)
         };
         if hi - lo <= f64::EPSILON * x.abs().max(1.0) {
-            return Ok(x);
+            if below && above {
+                return Ok(x);
+            }
+            break;
         }
     }
     Err(KernelError::Solver(what()))
