@@ -773,6 +773,25 @@ impl Design {
                     "use constant AFOV lenses, or a smaller AFOV",
                 ));
             }
+            // a longer chord at the same radius is a wider arc: its flanks
+            // turn by more than AFOV/2 (found by the design fuzzer:
+            // tests/design-corpus/found-b6be704196c67c49.toml)
+            let half_arc = (wmax / (2.0 * self.standard.radius)).min(1.0).asin();
+            let flank = (self.max_slope + half_arc).to_degrees();
+            if flank > limits::MAX_FLANK_DEG {
+                return Err(err(
+                    Param::Afov,
+                    self.params.lens.afov.to_degrees(),
+                    format!(
+                        "equal-radius lenses of r_s = {:.4} mm span chords up to {wmax:.4} mm on this surface, so their arcs open to {:.1}° each side; with the surface's slope of {:.1}° their flanks reach {flank:.1}°, over the {}° limit (the device must stay a graph over xy)",
+                        self.standard.radius,
+                        half_arc.to_degrees(),
+                        self.max_slope.to_degrees(),
+                        limits::MAX_FLANK_DEG
+                    ),
+                    "use constant AFOV lenses (lens.rule = \"constant-afov\"), a smaller AFOV or a flatter surface",
+                ));
+            }
         }
         Ok(())
     }
