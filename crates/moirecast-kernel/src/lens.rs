@@ -30,11 +30,14 @@ impl LensArc {
     /// The arc between distinct points `p0` and `p1`, bulging towards
     /// `toward` (projected perpendicular to the chord). An equal radius
     /// smaller than half the chord is raised to a half circle; design
-    /// validation rejects such designs before they get here.
+    /// validation rejects such designs before they get here. A crease
+    /// beyond a sphere's rim (NaN, far outside the layout, where the
+    /// mesher samples the extended layout) gives an arc of NaNs, which
+    /// callers take as no lens there.
     pub fn new(p0: DVec3, p1: DVec3, toward: DVec3, rule: ArcRule) -> Self {
         let c = p1 - p0;
         let w = c.length();
-        debug_assert!(w > 0.0, "lens creases coincide");
+        debug_assert!(w > 0.0 || w.is_nan(), "lens creases coincide");
         let chord_dir = c / w;
         let bulge = (toward - toward.dot(chord_dir) * chord_dir).normalize();
         let (radius, half_angle) = match rule {
