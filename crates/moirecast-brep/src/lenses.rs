@@ -4,9 +4,12 @@
 //! **Across** a lens (parameter t ∈ [0, 1]) every station's section is the
 //! exact arc as a rational quadratic: ends P0 and P1 with weight 1, and the
 //! tangents' intersection M + (w/2)·tan β·m with weight cos β. Across a band
-//! span of s (between two band edges) it is the quadratic through the span's
-//! ends and its exact middle point (s is no conic, so the quadratic is
-//! measured against s like every other approximation here).
+//! span of s (between two band edges) it is m quadratic pieces (C⁰ at
+//! double knots j/m), each through its ends and its exact middle point; s is
+//! no conic, so m doubles until the pieces lie within a quarter of the fit
+//! of s at the first stations (one piece for most spans; wide bands on a
+//! bending surface need more), and the surface is measured against s like
+//! every other approximation here.
 //! **Along** a lens (parameter v, the station) the homogeneous control points
 //! are interpolated by clamped C² cubics through shared stations, so at every
 //! station the section *is* the exact arc, and neighbouring lenses share
@@ -22,13 +25,17 @@ use glam::DVec3;
 use moirecast_kernel::lens::LensArc;
 use moirecast_kernel::model::BaseSection;
 use moirecast_kernel::profile::Profile;
-use moirecast_kernel::Design;
+use moirecast_kernel::{BaseKind, Design};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use truck_modeling::{BSplineSurface, KnotVec, NurbsSurface, Vector4};
 
-/// Homogeneous control points of one section: [P0, w·Pm, P1].
-type Section = [[f64; 4]; 3];
+/// Homogeneous control points of one section: [P0, w·Pm, P1] for an arc;
+/// [P0, M0, P1, M1, …, Pm] for a band span of m quadratic pieces.
+type Section = Vec<[f64; 4]>;
+
+/// Most quadratic pieces across one band span.
+const MAX_PIECES: usize = 64;
 
 /// Widest first spacing of the stations (mm); refinement halves spans.
 const FIRST_SPACING_MM: f64 = 2.0;
@@ -43,7 +50,7 @@ const VERIFY_T: [f64; 4] = [0.05, 0.35, 0.6, 0.95];
 fn section(arc: &LensArc) -> Section {
     let w = arc.half_angle.cos();
     let mid = 0.5 * (arc.p0 + arc.p1) + 0.5 * arc.width() * arc.half_angle.tan() * arc.bulge;
-    [
+    vec![
         [arc.p0.x, arc.p0.y, arc.p0.z, 1.0],
         [w * mid.x, w * mid.y, w * mid.z, w],
         [arc.p1.x, arc.p1.y, arc.p1.z, 1.0],
@@ -60,15 +67,33 @@ pub enum ExactSection<'a> {
 }
 
 impl ExactSection<'_> {
-    /// Homogeneous control points across: the exact arc, or the quadratic
-    /// through the span's ends and its point at t = 1/2.
-    fn section(&self) -> Section {
+    /// Homogeneous control points across: the exact arc, or for a span
+    /// `pieces` quadratics, each through its ends and its middle point.
+    fn section(&self, pieces: usize) -> Section {
         match self {
             ExactSection::Arc(arc) => section(arc),
             ExactSection::Span(span) => {
-                let (p0, mid, p1) = (span.point(0.0), span.point(0.5), span.point(1.0));
-                let m = 2.0 * mid - 0.5 * (p0 + p1);
-                [p0, m, p1].map(|p| [p.x, p.y, p.z, 1.0])
+                let at = |t: f64| {
+                    let p = span.point(t);
+                    [p.x, p.y, p.z, 1.0]
+                };
+                let m = pieces as f64;
+                let mut rows = vec![at(0.0)];
+                for j in 0..pieces {
+                    let (p0, mid, p1) = (
+                        span.point(j as f64 / m),
+                        span.point((j as f64 + 0.5) / m),
+                        span.point((j + 1) as f64 / m),
+                    );
+                    let c = 2.0 * mid - 0.5 * (p0 + p1);
+                    rows.push([c.x, c.y, c.z, 1.0]);
+                    rows.push(if j + 1 == pieces {
+                        at(1.0)
+                    } else {
+                        [p1.x, p1.y, p1.z, 1.0]
+                    });
+                }
+                rows
             }
         }
     }
@@ -144,7 +169,7 @@ impl LensFamily {
     ) -> Result<LensFamily, BrepError> {
         let (lo, hi) = v_range;
         let spans = ((hi - lo) / first_spacing(design)).ceil().max(2.0) as usize;
-        let mut stations: Vec<f64> = (0..=spans)
+        let stations: Vec<f64> = (0..=spans)
             .map(|j| {
                 if j == spans {
                     hi
@@ -154,9 +179,31 @@ impl LensFamily {
             })
             .collect();
         let exact = ExactSections { design, array };
-        let mut sections = exact.at(lenses, &stations)?;
+        let mut pieces = exact.pieces_across(lenses, &stations, fit)?;
+        loop {
+            match Self::refined(&exact, lenses, stations.clone(), pieces, fit) {
+                Err(BrepError::SurfaceFit { .. }) if exact.has_spans() && pieces < MAX_PIECES => {
+                    // between the first stations the spans bend more
+                    pieces *= 2;
+                }
+                done => return done,
+            }
+        }
+    }
+
+    /// Refines `stations` until the surfaces of `pieces` quadratics across
+    /// lie within `fit` of the exact sections.
+    fn refined(
+        exact: &ExactSections,
+        lenses: &[i64],
+        mut stations: Vec<f64>,
+        pieces: usize,
+        fit: f64,
+    ) -> Result<LensFamily, BrepError> {
+        let array = exact.array;
+        let mut sections = exact.at(lenses, &stations, pieces)?;
         for _ in 0..MAX_ROUNDS {
-            let surfaces = surfaces_of(lenses, &stations, &sections);
+            let surfaces = surfaces_of(lenses, &stations, &sections, pieces);
             let mids: Vec<f64> = stations.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
             let arcs = exact.arcs_at(lenses, &mids)?;
             let knots = clamped_knots(&stations);
@@ -174,7 +221,7 @@ impl LensFamily {
                 })
                 .collect();
             if !failing.contains(&true) {
-                let deviation = verify(&exact, lenses, &stations, &surfaces)?;
+                let deviation = verify(exact, lenses, &stations, &surfaces)?;
                 return Ok(LensFamily {
                     array,
                     stations,
@@ -200,7 +247,7 @@ impl LensFamily {
                 .map(|per_mid| {
                     (0..mids.len())
                         .filter(|&s| failing[s])
-                        .map(|s| per_mid[s].section())
+                        .map(|s| per_mid[s].section(pieces))
                         .collect()
                 })
                 .collect();
@@ -260,24 +307,33 @@ impl Along {
     /// The homogeneous section of `surface` at this station.
     fn section(&self, surface: &NurbsSurface<Vector4>) -> Across {
         let rows = surface.control_points();
-        Across(std::array::from_fn(|r| {
-            self.weights
-                .iter()
-                .zip(&rows[r][self.first..])
-                .fold(Vector4::new(0.0, 0.0, 0.0, 0.0), |acc, (w, c)| {
-                    acc + *c * *w
+        Across(
+            rows.iter()
+                .map(|row| {
+                    self.weights
+                        .iter()
+                        .zip(&row[self.first..])
+                        .fold(Vector4::new(0.0, 0.0, 0.0, 0.0), |acc, (w, c)| {
+                            acc + *c * *w
+                        })
                 })
-        }))
+                .collect(),
+        )
     }
 }
 
-/// A lens surface's rational quadratic across, at one station.
-struct Across([Vector4; 3]);
+/// A lens surface's section across at one station: rational quadratic
+/// pieces [P0, M0, P1, …] over equal parts of t.
+struct Across(Vec<Vector4>);
 
 impl Across {
     fn point(&self, t: f64) -> DVec3 {
+        let pieces = (self.0.len() - 1) / 2;
+        let scaled = t * pieces as f64;
+        let j = (scaled.floor().max(0.0) as usize).min(pieces - 1);
+        let (t, c) = (scaled - j as f64, &self.0[2 * j..]);
         let s = 1.0 - t;
-        let h = self.0[0] * (s * s) + self.0[1] * (2.0 * s * t) + self.0[2] * (t * t);
+        let h = c[0] * (s * s) + c[1] * (2.0 * s * t) + c[2] * (t * t);
         DVec3::new(h.x / h.w, h.y / h.w, h.z / h.w)
     }
 }
@@ -339,12 +395,56 @@ impl ExactSections<'_> {
     }
 
     /// sections[lens position][station]
-    fn at(&self, lenses: &[i64], stations: &[f64]) -> Result<Vec<Vec<Section>>, BrepError> {
+    fn at(
+        &self,
+        lenses: &[i64],
+        stations: &[f64],
+        pieces: usize,
+    ) -> Result<Vec<Vec<Section>>, BrepError> {
         Ok(self
             .arcs_at(lenses, stations)?
             .iter()
-            .map(|arcs| arcs.iter().map(ExactSection::section).collect())
+            .map(|arcs| arcs.iter().map(|a| a.section(pieces)).collect())
             .collect())
+    }
+
+    /// Whether this array's sections are band spans (a printed base).
+    fn has_spans(&self) -> bool {
+        self.array == Array::Base && !matches!(self.design.params.base.kind, BaseKind::DualLens)
+    }
+
+    /// Quadratic pieces across each band span: the fewest (a power of two)
+    /// that lie within a quarter of `fit` of every span at `stations`, at
+    /// the quarters of every piece. One for lens arcs, which are exact.
+    fn pieces_across(
+        &self,
+        lenses: &[i64],
+        stations: &[f64],
+        fit: f64,
+    ) -> Result<usize, BrepError> {
+        if !self.has_spans() {
+            return Ok(1);
+        }
+        let spans = self.arcs_at(lenses, stations)?;
+        let within = |pieces: usize| {
+            spans.par_iter().flatten().all(|span| {
+                let across = Across(
+                    span.section(pieces)
+                        .iter()
+                        .map(|c| Vector4::new(c[0], c[1], c[2], c[3]))
+                        .collect(),
+                );
+                (0..4 * pieces).all(|q| {
+                    let t = (q as f64 + 0.5) / (4 * pieces) as f64;
+                    span.distance(t, across.point(t)) <= fit / 4.0
+                })
+            })
+        };
+        let mut pieces = 1;
+        while pieces < MAX_PIECES && !within(pieces) {
+            pieces *= 2;
+        }
+        Ok(pieces)
     }
 }
 
@@ -363,11 +463,11 @@ fn merge_sections(
                 .map(|&v| {
                     if i < old_stations.len() && old_stations[i] == v {
                         i += 1;
-                        old[l][i - 1]
+                        old[l][i - 1].clone()
                     } else {
                         debug_assert_eq!(new_stations[j], v);
                         j += 1;
-                        new[l][j - 1]
+                        new[l][j - 1].clone()
                     }
                 })
                 .collect()
@@ -379,13 +479,14 @@ fn surfaces_of(
     lenses: &[i64],
     stations: &[f64],
     sections: &[Vec<Section>],
+    pieces: usize,
 ) -> BTreeMap<i64, NurbsSurface<Vector4>> {
-    let knots = (KnotVec::bezier_knot(2), clamped_knots(stations));
+    let knots = (across_knots(pieces), clamped_knots(stations));
     lenses
         .par_iter()
         .enumerate()
         .map(|(l, &k)| {
-            let rows: Vec<Vec<Vector4>> = (0..3)
+            let rows: Vec<Vec<Vector4>> = (0..2 * pieces + 1)
                 .map(|row| {
                     let data: Vec<[f64; 4]> = sections[l].iter().map(|s| s[row]).collect();
                     interpolate(stations, &data)
@@ -400,6 +501,21 @@ fn surfaces_of(
             )
         })
         .collect()
+}
+
+/// Quadratic knots across `pieces` equal parts of [0, 1], each inner knot
+/// doubled (the pieces meet with C⁰ at P_j): Bézier knots for one piece.
+fn across_knots(pieces: usize) -> KnotVec {
+    if pieces == 1 {
+        return KnotVec::bezier_knot(2);
+    }
+    let mut knots = vec![0.0; 3];
+    for j in 1..pieces {
+        let k = j as f64 / pieces as f64;
+        knots.extend([k, k]);
+    }
+    knots.extend([1.0; 3]);
+    KnotVec::from(knots)
 }
 
 /// The worst distance of an independent sample (other span fractions and

@@ -114,7 +114,7 @@ impl<'a> PrintedSurfaces<'a> {
     fn band_side(&self, c: i64) -> Result<NurbsSurface<Vector4>, BrepError> {
         let (surface, row) = match (self.base.surfaces.get(&c), self.base.surfaces.get(&(c - 1))) {
             (Some(s), _) => (s, 0),
-            (None, Some(s)) => (s, 2),
+            (None, Some(s)) => (s, s.control_points().len() - 1),
             (None, None) => {
                 return Err(BrepError::Topology(format!(
                     "band crease {c} borders no band span"

@@ -360,15 +360,20 @@ fn edge_curve<'s>(
     Ok(trim_curve(design, side, &pts))
 }
 
-/// The crease curve of `surface` at t = 0 (row 0) or t = 1 (row 2),
-/// between stations v0 and v1 (in that direction).
+/// The crease curve of `surface` at t = 0 (its first row of control
+/// points) or t = 1 (its last), between stations v0 and v1 (in that
+/// direction).
 pub(crate) fn crease_curve(
     surface: &truck_modeling::NurbsSurface<truck_modeling::Vector4>,
     t: f64,
     v0: f64,
     v1: f64,
 ) -> BSplineCurve<Point3> {
-    let row = if t == 0.0 { 0 } else { 2 };
+    let row = if t == 0.0 {
+        0
+    } else {
+        surface.control_points().len() - 1
+    };
     let points: Vec<Point3> = surface.control_points()[row]
         .iter()
         .map(|h| Point3::new(h.x / h.w, h.y / h.w, h.z / h.w))
