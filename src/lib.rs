@@ -399,11 +399,32 @@ pub fn run_mold(
         lens_stats,
         checks: measured,
     };
-    let mold = moirecast_mold::build_mold(&spec.design, &build.mesh, &spec.mold, progress)
-        .map_err(|e| RunError::mold(spec, e))?;
+    // The cavity's exact shape, device.step in the mold frame, is built
+    // beside the mold's mesh work.
+    let pose = moirecast_mold::Pose::of(&spec.design, spec.mold.flip, spec.mold.shrink_scale);
+    let (mold, step) = rayon::join(
+        || moirecast_mold::build_mold(&spec.design, &build.mesh, &spec.mold, progress),
+        || {
+            moirecast_brep::device_step_mapped(
+                &spec.design,
+                &build.mesh,
+                (
+                    "device.step",
+                    "moirecast mold: the cavity's shape, the device in the mold frame",
+                ),
+                Some(pose.affine()),
+            )
+        },
+    );
+    let mold = mold.map_err(|e| RunError::mold(spec, e))?;
+    let step = step.map_err(|e| RunError::Internal {
+        stage: "building the device's B-rep",
+        detail: e.to_string(),
+    })?;
     progress.stage("writing", 1);
     let mut checks: Vec<CheckResult> = build.checks.clone();
     checks.extend(mold.checks.iter().cloned());
+    checks.extend(step.checks.iter().cloned());
     // Every STL is encoded in parallel: the halves as they were checked
     // when cut (their checks are in `checks` already), the construction
     // solids validated here.
@@ -477,7 +498,9 @@ pub fn run_mold(
         )
         .into_bytes(),
     );
-    let report = mold_report::mold_report(spec, &mold, &checks, reports);
+    let report = mold_report::mold_report(spec, &mold, &checks, reports, &step);
+    files.add("device.step", StepFile(step.step));
+    moirecast_export::free_in_background(step.brep);
     let casting = report.casting.line();
     let (written, bytes) = commit_with_report(files, &report, out)?;
     progress.tick(1);

@@ -191,6 +191,9 @@ pub struct MoldReport {
     pub block_min: [f64; 3],
     pub block_max: [f64; 3],
     pub files: BTreeMap<String, FileReport>,
+    /// `device.step`: the cavity's shape as an exact B-rep solid, the
+    /// device's own in the mold frame.
+    pub device_brep: crate::report::BrepReport,
     pub volumes: VolumeReport,
     pub casting: CastingReport,
     /// Through-holes of each half (its genus): the channels through it.
@@ -215,6 +218,7 @@ pub fn mold_report(
     mold: &Mold,
     checks: &[CheckResult],
     files: BTreeMap<String, FileReport>,
+    device_step: &moirecast_brep::DeviceStep,
 ) -> MoldReport {
     let f = &mold.features;
     let v = &mold.volumes;
@@ -230,11 +234,12 @@ pub fn mold_report(
         frame: FrameReport {
             flip: spec.mold.flip,
             shrink_scale: spec.mold.shrink_scale,
-            note: "all files share the mold frame: device.stl is the cavity's shape (the device rotated 180° about x if flipped, scaled by shrink_scale about its outline's centre)",
+            note: "all files share the mold frame: device.stl and device.step are the cavity's shape (the device rotated 180° about x if flipped, scaled by shrink_scale about its outline's centre)",
         },
         block_min: f.block_lo.to_array(),
         block_max: f.block_hi.to_array(),
         files,
+        device_brep: crate::report::BrepReport::of(device_step),
         volumes: VolumeReport {
             block_mm3: v.block,
             top_mm3: v.top,

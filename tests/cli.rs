@@ -597,8 +597,9 @@ fn small_mold() -> String {
 }
 
 /// The files `moirecast mold` writes besides the construction solids.
-const MOLD_FILES: [&str; 5] = [
+const MOLD_FILES: [&str; 6] = [
     "device.stl",
+    "device.step",
     "mold-top.stl",
     "mold-bottom.stl",
     "assembly.scad",

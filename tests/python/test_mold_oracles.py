@@ -118,6 +118,30 @@ def test_the_cavity_is_the_device(spec, molds):
     assert distance.max() <= report["design"]["tolerance_mm"]
 
 
+@pytest.mark.parametrize("spec", MOLD_SPECS, ids=IDS)
+def test_the_cavity_step_is_the_device_step_posed(spec, molds, tmp_path_factory):
+    """The mold's device.step is the device's own B-rep moved into the mold
+    frame: OpenCascade reads one valid solid with the device's faces; its
+    volume is the device.step of `moirecast device` times shrink_scale³ (a
+    similarity moves NURBS exactly), and its centre of mass is the
+    mold-frame device.stl's to within the tolerance (so it is posed where
+    the cavity is: flipped, scaled about the outline's centre)."""
+    from test_step_oracles import read_step
+
+    trimesh = oracle("trimesh")
+    out, report = molds(spec)
+    device_out, _ = runs_once(tmp_path_factory, "device")(spec)
+    posed, own = read_step(out / "device.step"), read_step(device_out / "device.step")
+    assert posed["solids"] == 1
+    assert posed["valid"], "BRepCheck_Analyzer finds the mold's device.step invalid"
+    assert posed["faces"] == own["faces"] == report["device_brep"]["faces"]
+    scale = report["frame"]["shrink_scale"]
+    assert posed["volume"] == pytest.approx(own["volume"] * scale**3, rel=1e-9)
+    stl = trimesh.load(str(out / "device.stl"), process=False)
+    offset = np.linalg.norm(np.array(posed["centre"]) - stl.center_mass)
+    assert offset <= report["design"]["tolerance_mm"], offset
+
+
 # ---- OpenSCAD ------------------------------------------------------------
 
 NODE_RUNNER = ROOT / "tests" / "node" / "openscad.mjs"

@@ -48,6 +48,7 @@ def read_step(path):
         "faces": count(TopAbs_FACE),
         "valid": BRepCheck_Analyzer(shape).IsValid(),
         "volume": props.Mass(),
+        "centre": [props.CentreOfMass().X(), props.CentreOfMass().Y(), props.CentreOfMass().Z()],
     }
 
 

@@ -57,12 +57,33 @@ pub fn device_step(
     dm: &DeviceMesh,
     file_name: &str,
 ) -> Result<DeviceStep, BrepError> {
-    let brep = build_brep(design, dm)?;
-    let step = step_file_of(
-        std::slice::from_ref(&brep.solid),
-        file_name,
-        "moirecast device: level-line moire lens arrays",
-    );
+    device_step_mapped(
+        design,
+        dm,
+        (file_name, "moirecast device: level-line moire lens arrays"),
+        None,
+    )
+}
+
+/// [`device_step`] with the solid moved by `map` (a proper similarity, as
+/// the mold's pose: it keeps the solid's orientation), exactly: NURBS
+/// control points, planes and trims map as points.
+pub fn device_step_mapped(
+    design: &Design,
+    dm: &DeviceMesh,
+    (file_name, description): (&str, &str),
+    map: Option<glam::DAffine3>,
+) -> Result<DeviceStep, BrepError> {
+    let mut brep = build_brep(design, dm)?;
+    if let Some(map) = map {
+        let m = map.to_cols_array();
+        let matrix = truck_modeling::Matrix4::new(
+            m[0], m[1], m[2], 0.0, m[3], m[4], m[5], 0.0, m[6], m[7], m[8], 0.0, m[9], m[10],
+            m[11], 1.0,
+        );
+        brep.solid = truck_modeling::builder::transformed(&brep.solid, matrix);
+    }
+    let step = step_file_of(std::slice::from_ref(&brep.solid), file_name, description);
     let s = &brep.stats;
     let checks = vec![surface_fit_check(
         design,

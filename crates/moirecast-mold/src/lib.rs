@@ -36,6 +36,7 @@ pub use error::{MoldError, MoldParam, Result};
 pub use features::{Features, Gate, Key, Vent, VentPlace};
 pub use invariants::{Draft, Volumes, CAVITY_ON_DEVICE_MM, OVERLAP_MM3, VOLUME_SUM_REL};
 pub use params::{MoldParams, MIN_WALL_MM};
+pub use parting::Pose;
 
 use boolean::{to_mesh, union_all};
 use cut::{Channels, CutInputs, KeySolids, Regions};

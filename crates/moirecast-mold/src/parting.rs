@@ -3,7 +3,7 @@
 //! horizontally outward from the mid-wall curve outside it.
 
 use crate::error::{MoldError, Result};
-use glam::{DVec2, DVec3};
+use glam::{DAffine3, DMat3, DVec2, DVec3};
 use moirecast_kernel::mesher::{Patch, Side};
 use moirecast_kernel::model::LensRef;
 use moirecast_kernel::{Design, DeviceMesh, Mesh};
@@ -139,7 +139,7 @@ impl PosedDevice {
     pub fn new(design: &Design, device: &DeviceMesh, flip: bool, scale: f64) -> Result<Self> {
         let (ox0, ox1) = design.outline_x;
         let hh = design.half_height;
-        let centre = DVec3::new(0.5 * (ox0 + ox1), 0.0, 0.0);
+        let centre = Pose::of(design, flip, scale).centre;
         let positions: Vec<DVec3> = device
             .mesh
             .positions
@@ -273,6 +273,46 @@ fn split_walls(mesh: &mut Mesh, faces: &mut Vec<Face>) -> Result<Vec<Level>> {
         }
     }
     Ok(levels)
+}
+
+/// The map from the design frame to the mold frame: a turn of 180° about
+/// the x axis through `centre` if `flip`, then a scale by `scale` about
+/// `centre` (the outline's centre at z = 0). A proper similarity: it keeps
+/// every solid's orientation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose {
+    pub centre: DVec3,
+    pub flip: bool,
+    pub scale: f64,
+}
+
+impl Pose {
+    /// The pose of `design` in its mold.
+    pub fn of(design: &Design, flip: bool, scale: f64) -> Pose {
+        let (ox0, ox1) = design.outline_x;
+        Pose {
+            centre: DVec3::new(0.5 * (ox0 + ox1), 0.0, 0.0),
+            flip,
+            scale,
+        }
+    }
+
+    /// A point of the design frame in the mold frame.
+    pub fn apply(&self, p: DVec3) -> DVec3 {
+        pose(self.centre, self.flip, self.scale, p)
+    }
+
+    /// The same map as an affine transform (for exact geometry: NURBS
+    /// control points map as points).
+    pub fn affine(&self) -> DAffine3 {
+        let turn = if self.flip {
+            DMat3::from_diagonal(DVec3::new(1.0, -1.0, -1.0))
+        } else {
+            DMat3::IDENTITY
+        };
+        let linear = turn * self.scale;
+        DAffine3::from_mat3_translation(linear, self.centre - linear * self.centre)
+    }
 }
 
 fn pose(centre: DVec3, flip: bool, scale: f64, p: DVec3) -> DVec3 {
@@ -1005,6 +1045,28 @@ fn sides_and_cap(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The affine form of a pose maps points as the pose does, flipped or
+    /// not.
+    #[test]
+    fn a_pose_and_its_affine_map_agree() {
+        for flip in [false, true] {
+            let pose = Pose {
+                centre: DVec3::new(1.5, 0.0, 0.0),
+                flip,
+                scale: 1.02,
+            };
+            for p in [
+                DVec3::ZERO,
+                DVec3::new(-3.0, 2.0, 0.7),
+                DVec3::new(9.0, -4.0, -1.0),
+            ] {
+                let (a, b) = (pose.apply(p), pose.affine().transform_point3(p));
+                assert!(a.distance(b) < 1e-12, "{flip}: {a} against {b}");
+            }
+            assert!(pose.affine().matrix3.determinant() > 0.0);
+        }
+    }
 
     /// Points crowding a corner (a crease just outside the wall snap, its
     /// rung split at mid-wall) never reach the top edge closer than the
