@@ -361,9 +361,23 @@ impl Site<'_> {
             let to_cavity = outline.signed_distance(xy) - socket_r;
             let to_outside = -block.signed_distance(xy) - socket_r;
             if to_cavity < MIN_WALL_MM || to_outside < MIN_WALL_MM {
+                // the socket stands in the middle of a wall_thickness square
+                let widest = tw - 2.0 * MIN_WALL_MM - 2.0 * p.key_clearance;
+                let thick_enough = 2.0 * (socket_r + MIN_WALL_MM);
+                let (param, fix) = if widest >= 0.1 {
+                    (
+                        MoldParam::KeyDiameter,
+                        format!("make mold.key_diameter at most {widest:.1} mm or mold.wall_thickness at least {thick_enough:.1} mm"),
+                    )
+                } else {
+                    (
+                        MoldParam::WallThickness,
+                        format!("make mold.wall_thickness at least {thick_enough:.1} mm: no key fits a {tw} mm wall with {MIN_WALL_MM} mm of mold on each side"),
+                    )
+                };
                 return Err(misfit(
                     "keys-clear-cavity",
-                    Some(MoldParam::KeyDiameter),
+                    Some(param),
                     k.at,
                     format!(
                         "a key socket {:.1} mm wide here comes {:.2} mm from the cavity and {:.2} mm from the block's side (at least {MIN_WALL_MM} mm needed)",
@@ -371,10 +385,7 @@ impl Site<'_> {
                         to_cavity,
                         to_outside
                     ),
-                    format!(
-                        "make mold.key_diameter at most {:.1} mm or mold.wall_thickness larger",
-                        (tw - 2.0 * MIN_WALL_MM - 2.0 * p.key_clearance).max(0.0)
-                    ),
+                    fix,
                 ));
             }
             let socket_top = k.at.z + p.key_height + p.key_clearance;
