@@ -420,10 +420,11 @@ fn every_accepted_design_builds_or_is_refused_by_name() {
         let with_mold = i % 3 == 0;
         cases.push((draw(&mut rng, with_mold), with_mold, None));
     }
+    const SLOW_CASE: Duration = Duration::from_secs(5);
     let (mut built, mut molds) = (0, 0);
     let mut refused: BTreeMap<String, usize> = BTreeMap::new();
     let mut bugs = Vec::new();
-    let (mut slowest, started) = (Duration::ZERO, Instant::now());
+    let (mut slowest, started) = ((Duration::ZERO, String::new()), Instant::now());
     let verbose = std::env::var_os("MOIRECAST_FUZZ_VERBOSE").is_some();
     for (n, (text, with_mold, from)) in cases.into_iter().enumerate() {
         let t = Instant::now();
@@ -442,7 +443,9 @@ fn every_accepted_design_builds_or_is_refused_by_name() {
                 bugs.push(format!("{}: {why}", saved.display()));
             }
         }
-        slowest = slowest.max(t.elapsed());
+        if t.elapsed() > slowest.0 {
+            slowest = (t.elapsed(), text);
+        }
         let _ = std::fs::remove_dir_all(out.join(n.to_string()));
         if soak > 1 && (n + 1) % 1000 == 0 {
             println!(
@@ -458,9 +461,13 @@ fn every_accepted_design_builds_or_is_refused_by_name() {
         "built {built} (with {molds} molds), refused {}, bugs {}; slowest case {:.2} s, all {:.1} s",
         refused.values().sum::<usize>(),
         bugs.len(),
-        slowest.as_secs_f64(),
+        slowest.0.as_secs_f64(),
         started.elapsed().as_secs_f64()
     );
+    // a slow case is not a failure, but worth a look: print it to rerun
+    if slowest.0 > SLOW_CASE {
+        println!("  the slowest case's spec:\n{}", slowest.1);
+    }
     for (rule, count) in &refused {
         println!("  refused by {rule}: {count}");
     }
