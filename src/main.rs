@@ -98,8 +98,10 @@ enum Command {
         #[arg(long, default_value = "127.0.0.1")]
         host: std::net::IpAddr,
     },
-    /// Build the device and its two-piece casting mold: DIR/device.stl,
-    /// DIR/mold-top.stl, DIR/mold-bottom.stl, DIR/assembly.scad and DIR/report.json.
+    /// Build the device and its two-piece casting mold: DIR/mold-top.stl,
+    /// DIR/mold-bottom.stl, the cavity's shape as DIR/device.stl and
+    /// DIR/device.step (mold frame), DIR/assembly.scad, the construction
+    /// solids and DIR/report.json.
     Mold {
         #[command(flatten)]
         run: RunArgs,
