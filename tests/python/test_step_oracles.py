@@ -11,6 +11,7 @@ compared with the mesh volume extrapolated to tolerance zero (Richardson,
 from the spec's tolerance and half of it): to 1e-4 relative. The raw mesh
 volume must be below it by no more than lens area × tolerance.
 """
+import pathlib
 import re
 
 import pytest
@@ -99,3 +100,18 @@ def test_step_volume_is_the_device_volume(spec, built, tmp_path):
     lens_area = 2.0 * d["width_mm"] * d["height_mm"] / math.cos(math.radians(d["afov_deg"] / 2))
     lens_area /= math.cos(math.radians(report["derived"]["max_surface_slope_deg"]))
     assert 0.0 < v_occ - v_mesh <= lens_area * tol, (v_occ, v_mesh)
+
+
+# Designs whose device.step OpenCascade once found invalid (the random
+# designs of test_mold_oracles.py found them), kept beside the design
+# fuzzer's corpus.
+OCC_FOUND = sorted((pathlib.Path(__file__).resolve().parents[1] / "design-corpus").glob("found-occ-*.toml"))
+
+
+@pytest.mark.parametrize("spec", OCC_FOUND, ids=[s.stem for s in OCC_FOUND])
+def test_opencascade_finds_past_invalid_designs_valid(spec, tmp_path):
+    _, report = build(spec, tmp_path / "out")
+    step = read_step(tmp_path / "out" / "device.step")
+    assert step["solids"] == 1
+    assert step["valid"], f"BRepCheck_Analyzer finds {spec.name}'s device.step invalid"
+    assert step["faces"] == report["brep"]["faces"]

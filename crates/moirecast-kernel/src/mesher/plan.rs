@@ -539,10 +539,73 @@ impl<'a> Planner<'a> {
                 }
             }
         }
+        for (k, samples) in creases {
+            for wall in [d.outline_x.0, d.outline_x.1] {
+                ys.extend(self.touches(*k, samples, wall)?);
+            }
+        }
         ys.sort_by(|a, b| a.y.total_cmp(&b.y));
         Ok(ys)
     }
+
+    /// Where base crease `k` (sampled at `samples`) comes within the wall
+    /// snap of the wall at x = `wall` between its samples without crossing
+    /// it: a row there, so that the crease's vertex touches the wall and the
+    /// lens piece beside it pinches at that vertex instead of narrowing to
+    /// a neck a few nanometres wide between rows (which no B-rep trim can
+    /// follow: OpenCascade found such a face's wire self-intersecting on a
+    /// random design, tests/python/test_mold_oracles.py).
+    fn touches(&self, k: i64, samples: &[(f64, DVec3)], wall: f64) -> Result<Vec<Crossing>> {
+        let d = self.design;
+        let hh = d.half_height;
+        let gap = |v: f64| -> Result<f64> { Ok(d.base_crease_point(k, v)?.x - wall) };
+        let mut found = Vec::new();
+        for w in samples.windows(3) {
+            let [(va, pa), (_, pb), (vc, pc)] = [w[0], w[1], w[2]];
+            let (sa, sb, sc) = (pa.x - wall, pb.x - wall, pc.x - wall);
+            let one_side = (sa > 0.0) == (sb > 0.0) && (sb > 0.0) == (sc > 0.0);
+            // a local minimum of the distance, near the wall, with every
+            // sample clear of it (a crease that lies on the wall at a sample
+            // is the rows' business already)
+            let clear = |s: f64| s.is_finite() && s.abs() > WALL_SNAP_MM;
+            if !(clear(sa) && clear(sb) && clear(sc) && one_side)
+                || sb.abs() > sa.abs()
+                || sb.abs() > sc.abs()
+                || sb.abs() > TOUCH_SEARCH_MM
+            {
+                continue;
+            }
+            // golden-section search for the closest approach in [va, vc]
+            let (mut lo, mut hi) = (va, vc);
+            const R: f64 = 0.618_033_988_749_894_9;
+            let (mut x1, mut x2) = (hi - R * (hi - lo), lo + R * (hi - lo));
+            let (mut f1, mut f2) = (gap(x1)?.abs(), gap(x2)?.abs());
+            for _ in 0..60 {
+                if f1 < f2 {
+                    (hi, x2, f2) = (x2, x1, f1);
+                    x1 = hi - R * (hi - lo);
+                    f1 = gap(x1)?.abs();
+                } else {
+                    (lo, x1, f1) = (x1, x2, f2);
+                    x2 = lo + R * (hi - lo);
+                    f2 = gap(x2)?.abs();
+                }
+            }
+            let v = 0.5 * (lo + hi);
+            if gap(v)?.abs() <= WALL_SNAP_MM {
+                let y = d.base_crease_point(k, v)?.y;
+                if y > -hh && y < hh {
+                    found.push(Crossing { y, slope: 0.0 });
+                }
+            }
+        }
+        Ok(found)
+    }
 }
+
+/// Closest sampled distance (mm) of a base crease to a wall at which its
+/// closest approach between samples is searched for a touch.
+const TOUCH_SEARCH_MM: f64 = 0.05;
 
 /// Where a base crease crosses an x-wall: at height `y`, leaving the wall
 /// by `slope` mm in x per mm in y.
