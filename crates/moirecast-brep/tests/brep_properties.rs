@@ -35,13 +35,14 @@ proptest! {
 }
 
 /// The printed bodies' B-rep on a design whose band edges touch the side
-/// walls tangentially (rings on a plane): the repaired band outlines follow
-/// the mesh's edges, and the solids still close.
+/// walls tangentially at rows (rings on a plane; touches the mesher finds
+/// between rows get a row at the touch and need no repair): the repaired
+/// band outlines follow the mesh's edges, and the solids still close.
 #[test]
 fn printed_bodies_with_repaired_wall_touches_give_closed_breps() {
     use moirecast_kernel::*;
-    let mut p = DesignParams::with_defaults(PitchSurface::Plane, 16.0, 16.0, 0.5);
-    p.profile = Profile::Rings { wavelength: 4.0 };
+    let mut p = DesignParams::with_defaults(PitchSurface::Plane, 24.0, 24.0, 0.5);
+    p.profile = Profile::Rings { wavelength: 6.0 };
     p.base.kind = BaseKind::Printed(PrintedBase::default());
     let d = Design::new(p).unwrap();
     let dm = mesh_device(&d, &Silent).unwrap();

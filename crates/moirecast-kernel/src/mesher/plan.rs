@@ -564,11 +564,11 @@ impl<'a> Planner<'a> {
             let [(va, pa), (_, pb), (vc, pc)] = [w[0], w[1], w[2]];
             let (sa, sb, sc) = (pa.x - wall, pb.x - wall, pc.x - wall);
             let one_side = (sa > 0.0) == (sb > 0.0) && (sb > 0.0) == (sc > 0.0);
-            // a local minimum of the distance, near the wall, with every
-            // sample clear of it (a crease that lies on the wall at a sample
-            // is the rows' business already)
+            // a local minimum of the distance, near the wall, between
+            // samples clear of it (a crease that lies along the wall over
+            // samples is the rows' business already)
             let clear = |s: f64| s.is_finite() && s.abs() > WALL_SNAP_MM;
-            if !(clear(sa) && clear(sb) && clear(sc) && one_side)
+            if !(clear(sa) && sb.is_finite() && clear(sc) && one_side)
                 || sb.abs() > sa.abs()
                 || sb.abs() > sc.abs()
                 || sb.abs() > TOUCH_SEARCH_MM
