@@ -73,27 +73,23 @@ impl ExactSection<'_> {
         match self {
             ExactSection::Arc(arc) => section(arc),
             ExactSection::Span(span) => {
-                let at = |t: f64| {
-                    let p = span.point(t);
-                    [p.x, p.y, p.z, 1.0]
-                };
-                let m = pieces as f64;
-                let mut rows = vec![at(0.0)];
-                for j in 0..pieces {
-                    let (p0, mid, p1) = (
-                        span.point(j as f64 / m),
-                        span.point((j as f64 + 0.5) / m),
-                        span.point((j + 1) as f64 / m),
-                    );
-                    let c = 2.0 * mid - 0.5 * (p0 + p1);
-                    rows.push([c.x, c.y, c.z, 1.0]);
-                    rows.push(if j + 1 == pieces {
-                        at(1.0)
-                    } else {
-                        [p1.x, p1.y, p1.z, 1.0]
-                    });
-                }
-                rows
+                // the span at every piece's ends and middle, each once
+                let halves = 2 * pieces;
+                let p: Vec<DVec3> = (0..=halves)
+                    .map(|i| span.point(i as f64 / halves as f64))
+                    .collect();
+                (0..=halves)
+                    .map(|i| {
+                        // even rows are the pieces' ends, odd rows their
+                        // middle control points
+                        let c = if i % 2 == 0 {
+                            p[i]
+                        } else {
+                            2.0 * p[i] - 0.5 * (p[i - 1] + p[i + 1])
+                        };
+                        [c.x, c.y, c.z, 1.0]
+                    })
+                    .collect()
             }
         }
     }
@@ -428,12 +424,7 @@ impl ExactSections<'_> {
         let spans = self.arcs_at(lenses, stations)?;
         let within = |pieces: usize| {
             spans.par_iter().flatten().all(|span| {
-                let across = Across(
-                    span.section(pieces)
-                        .iter()
-                        .map(|c| Vector4::new(c[0], c[1], c[2], c[3]))
-                        .collect(),
-                );
+                let across = Across(span.section(pieces).into_iter().map(homogeneous).collect());
                 (0..4 * pieces).all(|q| {
                     let t = (q as f64 + 0.5) / (4 * pieces) as f64;
                     span.distance(t, across.point(t)) <= fit / 4.0
@@ -491,7 +482,7 @@ fn surfaces_of(
                     let data: Vec<[f64; 4]> = sections[l].iter().map(|s| s[row]).collect();
                     interpolate(stations, &data)
                         .into_iter()
-                        .map(|c| Vector4::new(c[0], c[1], c[2], c[3]))
+                        .map(homogeneous)
                         .collect()
                 })
                 .collect();
@@ -501,6 +492,11 @@ fn surfaces_of(
             )
         })
         .collect()
+}
+
+/// A homogeneous control point as truck holds it.
+fn homogeneous(c: [f64; 4]) -> Vector4 {
+    Vector4::new(c[0], c[1], c[2], c[3])
 }
 
 /// Quadratic knots across `pieces` equal parts of [0, 1], each inner knot

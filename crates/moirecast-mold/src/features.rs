@@ -272,7 +272,7 @@ pub fn place(
     // surface, free of the ripple of single lenses.
     let revealer = |u: f64, v: f64| design.surface().point(u, v);
     let base = |u: f64, v: f64| design.base_surface(u, v);
-    let ceiling = if device.flip {
+    let ceiling = if device.pose.flip {
         Survey::new(design, device, base)
     } else {
         Survey::new(design, device, revealer)

@@ -129,22 +129,20 @@ pub struct PosedDevice {
     pub levels: Vec<Level>,
     /// The outline: the xy bounds of the posed device.
     pub outline: Rect,
-    pub flip: bool,
-    pub scale: f64,
-    /// The centre of the pose: the outline's centre at z = 0.
-    pub centre: DVec3,
+    /// How the device was posed in the mold frame.
+    pub pose: Pose,
 }
 
 impl PosedDevice {
     pub fn new(design: &Design, device: &DeviceMesh, flip: bool, scale: f64) -> Result<Self> {
         let (ox0, ox1) = design.outline_x;
         let hh = design.half_height;
-        let centre = Pose::of(design, flip, scale).centre;
+        let posed = Pose::of(design, flip, scale);
         let positions: Vec<DVec3> = device
             .mesh
             .positions
             .iter()
-            .map(|&p| crate::boolean::f32_exact(pose(centre, flip, scale, p)))
+            .map(|&p| crate::boolean::f32_exact(posed.apply(p)))
             .collect();
         let mut mesh = Mesh {
             positions,
@@ -172,8 +170,8 @@ impl PosedDevice {
         let levels = split_walls(&mut mesh, &mut faces)?;
         // The exact outline, posed (vertices lie on it to the wall snap).
         let (a, b) = (
-            pose(centre, flip, scale, DVec3::new(ox0, -hh, 0.0)),
-            pose(centre, flip, scale, DVec3::new(ox1, hh, 0.0)),
+            posed.apply(DVec3::new(ox0, -hh, 0.0)),
+            posed.apply(DVec3::new(ox1, hh, 0.0)),
         );
         let (lo, hi) = (
             crate::boolean::f32_exact(a.min(b)),
@@ -190,15 +188,13 @@ impl PosedDevice {
             faces,
             levels,
             outline,
-            flip,
-            scale,
-            centre,
+            pose: posed,
         })
     }
 
     /// A point of the design frame in the mold frame.
     pub fn pose(&self, p: DVec3) -> DVec3 {
-        pose(self.centre, self.flip, self.scale, p)
+        self.pose.apply(p)
     }
 }
 
@@ -297,9 +293,16 @@ impl Pose {
         }
     }
 
-    /// A point of the design frame in the mold frame.
+    /// A point of the design frame in the mold frame. A proper rotation
+    /// (det +1) keeps the triangles' orientation.
     pub fn apply(&self, p: DVec3) -> DVec3 {
-        pose(self.centre, self.flip, self.scale, p)
+        let q = p - self.centre;
+        let q = if self.flip {
+            DVec3::new(q.x, -q.y, -q.z)
+        } else {
+            q
+        };
+        self.centre + self.scale * q
     }
 
     /// The same map as an affine transform (for exact geometry: NURBS
@@ -313,13 +316,6 @@ impl Pose {
         let linear = turn * self.scale;
         DAffine3::from_mat3_translation(linear, self.centre - linear * self.centre)
     }
-}
-
-fn pose(centre: DVec3, flip: bool, scale: f64, p: DVec3) -> DVec3 {
-    // A proper rotation (det +1) keeps the triangles' orientation.
-    let q = p - centre;
-    let q = if flip { DVec3::new(q.x, -q.y, -q.z) } else { q };
-    centre + scale * q
 }
 
 /// A piecewise-linear function z(t) with strictly increasing t.
