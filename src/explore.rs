@@ -1,13 +1,17 @@
 //! `moirecast explore`: the (a, d) design space of METHOD §3 as a grid, as
 //! in the paper's Fig. 7, scored by moiré fidelity: `grid.png` (each cell's
 //! best frame, labelled "a d/D_s"), `report.json` (fidelity, local
-//! fidelity and level-line contrast per cell) and `best.toml`, the spec of
-//! the best cell. Cells are ranked by level-line contrast
-//! ([`moirecast_render::fidelity::level_line_contrast`]): on a curved device
-//! the global fidelity of METHOD §8 mixes level lines seen at different
-//! angles, and both fidelities are correlations, which a noise-free frame
-//! of a defocused base (a faint, smooth moiré) satisfies as well as a sharp
-//! one. The contrast peaks where the base is in focus (d = D_s).
+//! fidelity, level-line contrast and kept contrast per cell) and
+//! `best.toml`, the spec of the best cell. Cells are ranked by level-line
+//! contrast ([`moirecast_render::fidelity::level_line_contrast`]): on a
+//! curved device the global fidelity of METHOD §8 mixes level lines seen at
+//! different angles, and both fidelities are correlations, which a
+//! noise-free frame of a defocused base (a faint, smooth moiré) satisfies
+//! as well as a sharp one. The contrast peaks where the base is in focus
+//! (d = D_s). Each cell's **kept contrast** divides its contrast by that of
+//! the [`FlatSheet`]: the same optics and profile on a plane, in focus. It
+//! ranks as the contrast does, and reads as a share: how much of what the
+//! lenses can show flat survives the surface and the base's placement.
 
 use crate::commit_with_report;
 use crate::render::png;
@@ -52,6 +56,9 @@ pub struct Cell {
     /// (`moirecast_render::fidelity::level_line_contrast`), which ranks the
     /// cells, and its tilt.
     pub contrast: Option<f64>,
+    /// The share of the flat sheet's contrast that this cell keeps:
+    /// `contrast` over [`FlatSheet::contrast`] (see the module's doc).
+    pub kept_contrast: Option<f64>,
     pub best_tilt_deg: Option<f64>,
     /// Why the design is invalid (METHOD's validity rules), if it is.
     pub invalid: Option<String>,
@@ -69,6 +76,8 @@ struct ExploreReport {
     tolerance_mm: f64,
     tilts_deg: Vec<f64>,
     seed: u64,
+    /// What each cell's kept contrast is measured against.
+    flat_sheet: FlatSheet,
     /// Row-major: rows are d/D_s, columns are a.
     cells: Vec<Cell>,
     /// The cell with the highest level-line contrast.
@@ -78,7 +87,10 @@ struct ExploreReport {
 pub struct ExploreOutcome {
     pub written: Vec<PathBuf>,
     pub bytes: usize,
+    /// The best cell's (a, d in mm, level-line contrast).
     pub best: (f64, f64, f64),
+    /// The best cell's kept contrast, if the flat sheet has one.
+    pub kept_contrast: Option<f64>,
 }
 
 /// `text` with `[base] a` and `d` set; a relative profile image is made
@@ -111,10 +123,111 @@ fn spec_with_base(text: &str, a: f64, d: f64, spec_dir: Option<&Path>) -> Result
 /// The scored (a, d) grid: one cell per (d/D_s, a), row-major (rows are
 /// d/D_s, columns a), each with its best frame and label "a d/D_s".
 pub struct ExploreGrid {
+    pub flat_sheet: FlatSheet,
     pub cells: Vec<Cell>,
     pub frames: Vec<(Rgb8, String)>,
     /// The cell with the highest level-line contrast.
     pub best: usize,
+}
+
+/// A design's best frame over the options' tilts.
+struct BestFrame {
+    /// The highest level-line contrast, its tilt and its frame.
+    contrast: f64,
+    tilt_deg: f64,
+    frame: Rgb8,
+    /// The highest fidelity and local fidelity over the tilts.
+    fidelity: f64,
+    local_fidelity: f64,
+}
+
+/// Renders `design` at every tilt of `options` and keeps the best.
+fn best_over_tilts(
+    design: &Design,
+    options: &ExploreOptions,
+    lighting: moirecast_render::frame::Lighting,
+) -> Result<BestFrame> {
+    // A dual-lens design seen as the sections allow needs no mesh: its
+    // frames are traced through its exact cross-sections alone.
+    let sections = options.tracer.sections(design, options.size);
+    let sections_alone = sections
+        .as_ref()
+        .filter(|_| options.sections_trace_every_frame())
+        .and_then(|s| s.bounds());
+    let (dm, mesh, absorbing);
+    let scene = match sections_alone {
+        Some(bounds) => Scene::framing(bounds),
+        None => {
+            dm = mesh_device(design, &Silent).context("meshing a cell")?;
+            (mesh, absorbing) =
+                traced_mesh(design, &dm).context("building a cell's traced bodies")?;
+            Scene::with_absorbing(&mesh, absorbing)
+        }
+    };
+    let mut best: Option<BestFrame> = None;
+    let (mut fidelity, mut local_fidelity) = (0.0f64, 0.0f64);
+    for &tilt in &options.tilts_deg {
+        let view = options.view(tilt, lighting);
+        let (f, global) = render_scored(design, &scene, sections.as_ref(), view);
+        fidelity = fidelity.max(global);
+        local_fidelity = local_fidelity.max(f.local_fidelity());
+        let contrast = f.level_line_contrast();
+        if best.as_ref().is_none_or(|b| contrast > b.contrast) {
+            best = Some(BestFrame {
+                contrast,
+                tilt_deg: tilt,
+                frame: to_rgb8(f.width, f.height, &f.rgb),
+                fidelity: 0.0,
+                local_fidelity: 0.0,
+            });
+        }
+    }
+    let best = best.context("at least one tilt")?;
+    Ok(BestFrame {
+        fidelity,
+        local_fidelity,
+        ..best
+    })
+}
+
+/// The flat sheet a design's level-line contrast is measured against: the
+/// same layout, lens, base kind, levels and profile on a plane, its base at
+/// a = 0, d = D_s (in focus), seen at the same tilts and lights. Its best
+/// contrast is what these optics show without a curved surface.
+#[derive(Clone, Serialize)]
+pub struct FlatSheet {
+    /// Its best level-line contrast over the tilts; `None` if the flat
+    /// sheet is not a valid design, or shows no level lines.
+    pub contrast: Option<f64>,
+    /// Why the flat sheet is not a valid design, if it is not.
+    pub invalid: Option<String>,
+}
+
+impl FlatSheet {
+    fn of(
+        design: &Design,
+        options: &ExploreOptions,
+        lighting: moirecast_render::frame::Lighting,
+    ) -> Result<FlatSheet> {
+        let mut params = design.params.clone();
+        params.surface = moirecast_kernel::PitchSurface::Plane;
+        params.base.a = 0.0;
+        params.base.d = None;
+        params.tolerance = params.tolerance.max(PREVIEW_TOLERANCE_MM);
+        Ok(match Design::new(params) {
+            Err(e) => FlatSheet {
+                contrast: None,
+                invalid: Some(e.to_string()),
+            },
+            Ok(flat) => {
+                let contrast = best_over_tilts(&flat, options, lighting)?.contrast;
+                FlatSheet {
+                    contrast: (contrast > 0.0).then_some(contrast),
+                    invalid: None,
+                }
+            }
+        })
+    }
 }
 
 /// Scores every cell of the (a, d) grid of `spec` (see the module's doc).
@@ -146,6 +259,7 @@ pub fn explore_grid(
             fidelity,
             local_fidelity,
             contrast,
+            kept_contrast: None,
             best_tilt_deg,
             invalid,
         };
@@ -158,39 +272,16 @@ pub fn explore_grid(
             }
             Ok(design) => design,
         };
-        // A dual-lens cell seen as the sections allow needs no mesh: its
-        // frames are traced through its exact cross-sections alone.
-        let sections = options.tracer.sections(&design, options.size);
-        let sections_alone = sections
-            .as_ref()
-            .filter(|_| options.sections_trace_every_frame())
-            .and_then(|s| s.bounds());
-        let (dm, mesh, absorbing);
-        let scene = match sections_alone {
-            Some(bounds) => Scene::framing(bounds),
-            None => {
-                dm = mesh_device(&design, &Silent).context("meshing a cell")?;
-                (mesh, absorbing) =
-                    traced_mesh(&design, &dm).context("building a cell's traced bodies")?;
-                Scene::with_absorbing(&mesh, absorbing)
-            }
-        };
-        // (contrast, tilt, frame) of the best tilt; the best fidelities
-        let mut best: Option<(f64, f64, Rgb8)> = None;
-        let (mut fid, mut local) = (0.0f64, 0.0f64);
-        for &tilt in &options.tilts_deg {
-            let view = options.view(tilt, lighting);
-            let (f, global) = render_scored(&design, &scene, sections.as_ref(), view);
-            (fid, local) = (fid.max(global), local.max(f.local_fidelity()));
-            let contrast = f.level_line_contrast();
-            if best.as_ref().is_none_or(|b| contrast > b.0) {
-                best = Some((contrast, tilt, to_rgb8(f.width, f.height, &f.rgb)));
-            }
-        }
-        let (contrast, tilt, image) = best.context("at least one tilt")?;
+        let s = best_over_tilts(&design, options, lighting)?;
         Ok((
-            cell(Some(fid), Some(local), Some(contrast), Some(tilt), None),
-            (image, label),
+            cell(
+                Some(s.fidelity),
+                Some(s.local_fidelity),
+                Some(s.contrast),
+                Some(s.tilt_deg),
+                None,
+            ),
+            (s.frame, label),
         ))
     };
     // Cells in parallel: meshing a cell and building its BVH are partly
@@ -200,16 +291,26 @@ pub fn explore_grid(
         .iter()
         .flat_map(|&ratio| A_VALUES.iter().map(move |&a| (ratio, a)))
         .collect();
-    let (cells, frames): (Vec<Cell>, Vec<(Rgb8, String)>) = grid
-        .into_par_iter()
-        .map(|(ratio, a)| {
-            let cell = explore_cell(ratio, a);
-            progress.tick(1);
-            cell
-        })
-        .collect::<Result<Vec<_>>>()?
-        .into_iter()
-        .unzip();
+    let (cells, flat_sheet) = rayon::join(
+        || {
+            grid.into_par_iter()
+                .map(|(ratio, a)| {
+                    let cell = explore_cell(ratio, a);
+                    progress.tick(1);
+                    cell
+                })
+                .collect::<Result<Vec<_>>>()
+        },
+        || FlatSheet::of(base, options, lighting),
+    );
+    let (mut cells, frames): (Vec<Cell>, Vec<(Rgb8, String)>) = cells?.into_iter().unzip();
+    let flat_sheet = flat_sheet?;
+    for c in &mut cells {
+        c.kept_contrast = c
+            .contrast
+            .zip(flat_sheet.contrast)
+            .map(|(c, flat)| c / flat);
+    }
     let best = (0..cells.len())
         .filter(|&i| cells[i].contrast.is_some())
         .fold(None, |b: Option<usize>, i| match b {
@@ -218,6 +319,7 @@ pub fn explore_grid(
         })
         .context("no cell of the (a, d) grid is a valid design")?;
     Ok(ExploreGrid {
+        flat_sheet,
         cells,
         frames,
         best,
@@ -234,6 +336,7 @@ pub fn run_explore(
 ) -> Result<ExploreOutcome> {
     let base = &spec.design;
     let ExploreGrid {
+        flat_sheet,
         cells,
         frames,
         best,
@@ -255,6 +358,7 @@ pub fn run_explore(
         spec_with_base(&spec_text, b.a, b.d_mm, spec_dir.as_deref())?.into_bytes(),
     );
     let outcome_best = (b.a, b.d_mm, b.contrast.unwrap_or(0.0));
+    let kept_contrast = b.kept_contrast;
     let report = ExploreReport {
         moirecast: env!("CARGO_PKG_VERSION"),
         spec: crate::report::spec_name(spec),
@@ -264,6 +368,7 @@ pub fn run_explore(
         tolerance_mm: base.params.tolerance.max(PREVIEW_TOLERANCE_MM),
         tilts_deg: options.tilts_deg.clone(),
         seed: options.seed,
+        flat_sheet,
         cells,
         best,
     };
@@ -272,5 +377,6 @@ pub fn run_explore(
         written,
         bytes,
         best: outcome_best,
+        kept_contrast,
     })
 }

@@ -428,8 +428,14 @@ fn run(cli: Cli) -> Result<()> {
             bars.done();
             let done = result?;
             if !run.quiet {
-                let (a, d, f) = done.best;
-                eprintln!("best cell: a = {a}, d = {d:.4} mm, level-line contrast {f:.3}");
+                let (a, d, contrast) = done.best;
+                let kept = done
+                    .kept_contrast
+                    .map(|k| format!(", {k:.3} of the flat sheet's"))
+                    .unwrap_or_default();
+                eprintln!(
+                    "best cell: a = {a}, d = {d:.4} mm, level-line contrast {contrast:.3}{kept}"
+                );
                 print_written(&done.written, done.bytes, started);
             }
         }

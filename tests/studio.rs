@@ -164,6 +164,8 @@ fn every_endpoint_answers() {
     assert_eq!(cells.len(), 25);
     let best = grid["best"].as_u64().unwrap() as usize;
     assert!(cells[best]["contrast"].as_f64().unwrap() > 0.0);
+    assert!(cells[best]["kept_contrast"].as_f64().unwrap() > 0.0);
+    assert!(grid["flat_sheet"]["contrast"].as_f64().unwrap() > 0.0);
     let thumbnail = studio.get(grid["thumbnails"][best].as_str().unwrap());
     assert_eq!(thumbnail.status, 200);
     assert!(is_png(&thumbnail.body));

@@ -611,6 +611,7 @@ async fn explore(State(studio): State<Arc<Studio>>) -> Response {
     match rev.explore().await {
         Ok(grid) => Json(json!({
             "revision": rev.number,
+            "flat_sheet": grid.flat_sheet,
             "cells": grid.cells,
             "best": grid.best,
             "columns": crate::explore::A_VALUES.len(),

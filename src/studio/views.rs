@@ -1,7 +1,7 @@
 //! What the studio builds from a revision on first request: the device
 //! (mesh, STL, report), the mold halves, the explore grid.
 
-use crate::explore::{explore_grid, Cell};
+use crate::explore::{explore_grid, Cell, FlatSheet};
 use crate::render::{png, LightsChoice, RenderOptions, Tracer};
 use crate::report::{device_report, CheckReport, DeviceOutputs, FileReport};
 use crate::{measure_device, mesh_spec, refuse_failed, DeviceBuild, RunError, Thoroughness};
@@ -93,6 +93,7 @@ impl MoldView {
 
 /// The (a, d) grid with `moirecast explore`'s defaults.
 pub struct ExploreView {
+    pub flat_sheet: FlatSheet,
     pub cells: Vec<Cell>,
     pub thumbnails: Vec<Vec<u8>>,
     pub best: usize,
@@ -118,6 +119,7 @@ impl ExploreView {
                 .iter()
                 .map(|(image, _)| png(image))
                 .collect::<Result<_>>()?,
+            flat_sheet: grid.flat_sheet,
             cells: grid.cells,
             best: grid.best,
         })
