@@ -163,9 +163,28 @@ impl Design {
         })
     }
 
-    /// Base crease curve C_k(v) = s(u_k(v), v).
+    /// Base crease curve C_k(v) = s(u_k(v), v), with x at ±∞ where the
+    /// crease lies beyond the extended layout (see
+    /// [`beyond_extended_layout`](Self::beyond_extended_layout)).
     pub fn base_crease_point(&self, k: i64, v: f64) -> Result<DVec3> {
-        Ok(self.base_surface(self.base_crease_u(k, v)?, v))
+        let u = self.base_crease_u(k, v)?;
+        let mut p = self.base_surface(u, v);
+        if let Some(side) = self.beyond_extended_layout(u) {
+            p.x = side;
+        }
+        Ok(p)
+    }
+
+    /// The side (−∞ or +∞ in x) of a base crease at layout `u` beyond the
+    /// extended layout, the layout and its margin, where the surface is
+    /// validated; `None` within it. The device's base comes from within it
+    /// (the margin is settled so), and beyond it a surface may turn back
+    /// over the outline (a cylinder past a quarter turn: a ramp that runs on
+    /// past [0, 1] puts distant creases there), so a crease out there is
+    /// outside the device on its side, wherever its point lands.
+    pub fn beyond_extended_layout(&self, u: f64) -> Option<f64> {
+        let reach = self.params.width / 2.0 + self.margin;
+        (u.abs() > reach).then(|| f64::INFINITY.copysign(u))
     }
 
     /// Base lens k of a dual-lens design at station v (METHOD §5.1): from

@@ -394,7 +394,20 @@ fn row_creases(d: &Design, y: f64) -> Result<Vec<(f64, DVec3)>> {
             };
             v -= r / dydv;
         }
-        let p = found.ok_or_else(|| KernelError::Solver(format!("base crease {k} at y = {y}")))?;
+        // beyond the extended layout a crease is outside, on its side,
+        // whether or not its row's height was found there
+        let beyond = u_near.and_then(|u| d.beyond_extended_layout(u));
+        let p = match (found, beyond) {
+            (Some(p), None) => p,
+            (Some(_), Some(side)) => DVec3::new(side, y, f64::NAN),
+            (None, Some(side)) => {
+                // the next crease starts from the last one solved
+                slope = None;
+                creases.push((v_guess, DVec3::new(side, y, f64::NAN)));
+                continue;
+            }
+            (None, None) => return Err(KernelError::Solver(format!("base crease {k} at y = {y}"))),
+        };
         v_guess = v;
         creases.push((v, p));
     }

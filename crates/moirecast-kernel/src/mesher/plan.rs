@@ -460,12 +460,18 @@ impl<'a> Planner<'a> {
                     last = Some((idx, c));
                 }
             }
+            // beyond the extended layout a crease is outside, on its side
+            let u = &crease_u[(k - k0) as usize];
             creases.push((
                 *k,
                 stations
                     .iter()
-                    .cloned()
-                    .zip(s.first.iter().cloned())
+                    .zip(&s.first)
+                    .zip(u)
+                    .map(|((&v, &p), &u)| match d.beyond_extended_layout(u) {
+                        Some(side) => (v, DVec3::new(side, p.y, p.z)),
+                        None => (v, p),
+                    })
                     .collect(),
             ));
         }
