@@ -317,7 +317,13 @@ impl<'a> Planner<'a> {
                     * crowding;
                 // largest Δv with kvv Δv² + 2 dt ktv Δv = 8 e
                 let b = dt * ktv;
-                let dv = if kvv > 0.0 {
+                let c = 8.0 * kvv * e_along;
+                let dv = if c < 1e-6 * b * b {
+                    // nearly no pure curvature beside the twist: the form
+                    // below would cancel (to Δv = 0 where kvv is 1e-19,
+                    // found-43f707a1); this one does not
+                    8.0 * e_along / (b + (b * b + c).sqrt())
+                } else if kvv > 0.0 {
                     (-b + (b * b + 8.0 * kvv * e_along).sqrt()) / kvv
                 } else if b > 0.0 {
                     4.0 * e_along / b
