@@ -6,6 +6,9 @@ use crate::tolerance::SOLVE_RESIDUAL_MM;
 use glam::DVec2;
 
 const MAX_ITER: usize = 60;
+/// Steps [`bracketed_newton`] takes before it bisects where Newton stalls:
+/// a well-behaved solve has converged long before.
+const NEWTON_PATIENCE: usize = 20;
 
 /// Solves g(x) = 0 for a g with g' > 0 on the bracket [lo, hi], where
 /// g(lo) ≤ 0 ≤ g(hi). Newton steps with analytic derivative, falling back to
@@ -22,7 +25,8 @@ pub fn bracketed_newton(
 ) -> Result<f64> {
     let mut x = x0.clamp(lo, hi);
     let (mut below, mut above) = (false, false);
-    for _ in 0..200 {
+    let mut last_abs = f64::INFINITY;
+    for i in 0..200 {
         let (gx, dg) = g(x);
         if gx.abs() <= residual {
             return Ok(x);
@@ -32,8 +36,14 @@ pub fn bracketed_newton(
         } else {
             (hi, above) = (x, true);
         }
+        // Newton can fall into a cycle across a kink of g' (a shape
+        // profile's ridge: found-3844ff35), each step moving one end of
+        // the bracket a little. A solve still running after
+        // NEWTON_PATIENCE steps whose |g| did not halve bisects.
+        let stalled = i >= NEWTON_PATIENCE && gx.abs() > 0.5 * last_abs;
+        last_abs = gx.abs();
         let step = x - gx / dg;
-        x = if dg > 0.0 && step > lo && step < hi {
+        x = if !stalled && dg > 0.0 && step > lo && step < hi {
             step
         } else {
             0.5 * (lo + hi)
