@@ -494,7 +494,6 @@ impl<'a> Planner<'a> {
     /// crease leaves the wall there.
     fn crossings(&self, creases: &[(i64, Vec<(f64, DVec3)>)]) -> Result<Vec<Crossing>> {
         let d = self.design;
-        let hh = d.half_height;
         let mut ys = Vec::new();
         for (k, samples) in creases {
             for wall in [d.outline_x.0, d.outline_x.1] {
@@ -517,34 +516,7 @@ impl<'a> Planner<'a> {
                     if let Some((v0, s0)) = last {
                         if (s0 > 0.0) != (s > 0.0) {
                             // the root bracketed by these two samples, not another one
-                            let root = bracketed_secant(
-                                v0,
-                                v,
-                                &|| format!("base crease {k} meeting the wall x = {wall}"),
-                                |v| {
-                                    d.base_crease_point(*k, v)
-                                        .map(|p| p.x - wall)
-                                        .unwrap_or(f64::NAN)
-                                },
-                            )?;
-                            let y = d.base_crease_point(*k, root)?.y;
-                            if y > -hh && y < hh {
-                                // |dx/dy| of the crease, by central differences
-                                let h = 1e-6 * (v - v0).abs().max(1e-3);
-                                let (a, b) = (
-                                    d.base_crease_point(*k, root - h)?,
-                                    d.base_crease_point(*k, root + h)?,
-                                );
-                                let slope = ((b.x - a.x) / (b.y - a.y)).abs();
-                                ys.push(Crossing {
-                                    y,
-                                    slope: if slope.is_finite() {
-                                        slope
-                                    } else {
-                                        f64::INFINITY
-                                    },
-                                });
-                            }
+                            ys.extend(self.crossing(*k, wall, (v0, v))?);
                         }
                     }
                     last = Some((v, s));
@@ -558,6 +530,43 @@ impl<'a> Planner<'a> {
         }
         ys.sort_by(|a, b| a.y.total_cmp(&b.y));
         Ok(ys)
+    }
+
+    /// Where base crease `k` crosses the wall at x = `wall` between the
+    /// stations `v0` and `v1`, which bracket one crossing: the crossing, if
+    /// it lies between the layout's y-walls.
+    fn crossing(&self, k: i64, wall: f64, (v0, v): (f64, f64)) -> Result<Option<Crossing>> {
+        let d = self.design;
+        let hh = d.half_height;
+        let root = bracketed_secant(
+            v0,
+            v,
+            &|| format!("base crease {k} meeting the wall x = {wall}"),
+            |v| {
+                d.base_crease_point(k, v)
+                    .map(|p| p.x - wall)
+                    .unwrap_or(f64::NAN)
+            },
+        )?;
+        let y = d.base_crease_point(k, root)?.y;
+        if !(y > -hh && y < hh) {
+            return Ok(None);
+        }
+        // |dx/dy| of the crease, by central differences
+        let h = 1e-6 * (v - v0).abs().max(1e-3);
+        let (a, b) = (
+            d.base_crease_point(k, root - h)?,
+            d.base_crease_point(k, root + h)?,
+        );
+        let slope = ((b.x - a.x) / (b.y - a.y)).abs();
+        Ok(Some(Crossing {
+            y,
+            slope: if slope.is_finite() {
+                slope
+            } else {
+                f64::INFINITY
+            },
+        }))
     }
 
     /// Where base crease `k` (sampled at `samples`) comes within the wall
@@ -575,7 +584,10 @@ impl<'a> Planner<'a> {
         for w in samples.windows(3) {
             let [(va, pa), (_, pb), (vc, pc)] = [w[0], w[1], w[2]];
             let (sa, sb, sc) = (pa.x - wall, pb.x - wall, pc.x - wall);
-            let one_side = (sa > 0.0) == (sb > 0.0) && (sb > 0.0) == (sc > 0.0);
+            // (the middle one may lie in the snap band on the other side:
+            // found-d40d1b62, a crease dipping 5e-5 mm past the wall)
+            let one_side =
+                (sa > 0.0) == (sc > 0.0) && ((sb > 0.0) == (sa > 0.0) || sb.abs() <= WALL_SNAP_MM);
             // a local minimum of the distance, near the wall, between
             // samples clear of it (a crease that lies along the wall over
             // samples is the rows' business already)
@@ -587,24 +599,35 @@ impl<'a> Planner<'a> {
             {
                 continue;
             }
-            // golden-section search for the closest approach in [va, vc]
+            // golden-section search for the closest approach in [va, vc],
+            // on the side of the samples: past the wall it goes on to the
+            // deepest point, so that a crease dipping across the wall and
+            // back between samples is seen to cross twice
+            let side = sa.signum();
+            let toward = |v: f64| -> Result<f64> { Ok(side * gap(v)?) };
             let (mut lo, mut hi) = (va, vc);
             const R: f64 = 0.618_033_988_749_894_9;
             let (mut x1, mut x2) = (hi - R * (hi - lo), lo + R * (hi - lo));
-            let (mut f1, mut f2) = (gap(x1)?.abs(), gap(x2)?.abs());
+            let (mut f1, mut f2) = (toward(x1)?, toward(x2)?);
             for _ in 0..60 {
                 if f1 < f2 {
                     (hi, x2, f2) = (x2, x1, f1);
                     x1 = hi - R * (hi - lo);
-                    f1 = gap(x1)?.abs();
+                    f1 = toward(x1)?;
                 } else {
                     (lo, x1, f1) = (x1, x2, f2);
                     x2 = lo + R * (hi - lo);
-                    f2 = gap(x2)?.abs();
+                    f2 = toward(x2)?;
                 }
             }
             let v = 0.5 * (lo + hi);
-            if gap(v)?.abs() <= WALL_SNAP_MM {
+            let closest = toward(v)?;
+            if closest < -WALL_SNAP_MM {
+                // across the wall and back: two crossings, one on each side
+                for bracket in [(va, v), (v, vc)] {
+                    found.extend(self.crossing(k, wall, bracket)?);
+                }
+            } else if closest <= WALL_SNAP_MM {
                 let y = d.base_crease_point(k, v)?.y;
                 if y > -hh && y < hh {
                     found.push(Crossing { y, slope: 0.0 });
