@@ -476,8 +476,22 @@ fn lens_interior(
                 }
                 v -= r / (jm + km * (v - vm));
             }
-            let p = found
-                .ok_or_else(|| KernelError::Solver(format!("base lens {k} at t = {t}, y = {y}")))?;
+            let (p, v) = match found {
+                Some(p) => (p, v),
+                // the quadratic model's slope led astray (stations that
+                // crowd and spread within a few hq: found-b4638aa7): the
+                // chord method, its slope measured where it stalls
+                None => {
+                    let what = || format!("base lens {k} at t = {t}, y = {y}");
+                    let height = |v: f64| {
+                        d.base_section_near(k, v, predict(v))
+                            .map(|s| s.point(t).y - y)
+                            .unwrap_or(f64::NAN)
+                    };
+                    let v = crate::solve::newton_1d(vm + dv, &what, height)?;
+                    (d.base_section_near(k, v, predict(v))?.point(t), v)
+                }
+            };
             out.push((p, VertexOrigin::BaseLens { k, t, v }));
         }
     }
