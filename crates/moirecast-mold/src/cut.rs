@@ -77,11 +77,26 @@ fn sliver_free(
     if shortest >= SLIVER_MM && !has_slivers(done.solid.checks()) {
         return Ok(Some(done));
     }
-    let half = checked(
-        format!("{what}, slivers collapsed"),
-        half.simplify(SLIVER_MM),
-    )?;
-    Ok(join(to_mesh(&half)).map(checked_half))
+    let collapsed = |eps: f64| -> Result<Option<Half>> {
+        let half = checked(format!("{what}, slivers collapsed"), half.simplify(eps))?;
+        Ok(join(to_mesh(&half)).map(checked_half))
+    };
+    let done = collapsed(SLIVER_MM)?;
+    // Far from the origin f32 is coarser than SLIVER_MM (its spacing is
+    // 1.5e-5 mm at 150 mm): a sliver that still flips in f32 is collapsed
+    // again at a few f32 spacings of the half's extent (found-ede40982, a
+    // 297 mm wide device).
+    let Some(d) = done.as_ref().filter(|d| has_slivers(d.solid.checks())) else {
+        return Ok(done);
+    };
+    let extent = d
+        .solid
+        .mesh()
+        .positions
+        .iter()
+        .fold(0.0f64, |m, p| m.max(p.abs().max_element()));
+    let f32_spacing = extent as f32 - (extent as f32).next_down();
+    collapsed((4.0 * f32_spacing as f64).max(2.0 * SLIVER_MM))
 }
 
 /// The bottom and top rings of a vertical key frustum over `centre`, as
