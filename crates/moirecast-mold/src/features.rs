@@ -673,8 +673,8 @@ impl Site<'_> {
     }
 
     /// Every vent column rises to the top face inside the block, clear of
-    /// the sprue, the pour cone and the key sockets; no key socket runs
-    /// into the sprue.
+    /// the runner, the sprue, the pour cone and the key sockets; no key
+    /// socket runs into the sprue.
     fn check_columns(&self, vents: &[Vent], gate: &Gate, keys: &[Key]) -> Result<()> {
         let (block, p, socket_r) = (self.block, self.p, self.socket_r);
         let r_c = gate.cone_radius;
@@ -703,6 +703,19 @@ impl Site<'_> {
                         "the vent column runs into the sprue and pour cone ({sprue_gap:.2} mm apart)"
                     ),
                     "make the vents or the pour cone narrower".into(),
+                ));
+            }
+            // a column that starts below the runner's top and beside it
+            // opens into it (found-30761c83: a wall vent 0.08 mm beside
+            // the gate), one channel where two were meant
+            let runner_gap = runner_gap(gate, v.axis) - v.radius;
+            if runner_gap < MIN_WALL_MM && v.foot_z < gate.at.z + gate.radius + MIN_WALL_MM {
+                return Err(misfit(
+                    "vents-reach-top-face",
+                    Some(MoldParam::VentDiameter),
+                    at,
+                    format!("the vent column runs into the runner ({runner_gap:.2} mm apart)"),
+                    "make mold.vent_diameter or mold.gate_diameter smaller".into(),
                 ));
             }
             for k in keys {
@@ -736,7 +749,7 @@ impl Site<'_> {
     }
 
     /// Bolt holes along the rim's middle line, between the keys, where they
-    /// clear the sprue, the vents and the keys.
+    /// clear the runner, the sprue, the vents and the keys.
     fn bolts(&self, keys: &[Key], gate: &Gate, vents: &[Vent]) -> Result<Vec<DVec2>> {
         let (p, socket_r) = (self.p, self.socket_r);
         let (tw, r_c) = (p.wall_thickness, gate.cone_radius);
@@ -763,6 +776,7 @@ impl Site<'_> {
             for s in 1..pieces {
                 let q = a + (b - a) * (s as f64 / pieces as f64);
                 let clear = q.distance(gate.sprue_axis) - r_c - r_b >= MIN_WALL_MM
+                    && runner_gap(gate, q) - r_b >= MIN_WALL_MM
                     && vents
                         .iter()
                         .all(|v| q.distance(v.axis) - v.radius - r_b >= MIN_WALL_MM)
@@ -784,6 +798,14 @@ pub fn runner_span(gate: &Gate) -> (DVec3, DVec2, f64) {
     let from = gate.at - (dir * RUNNER_INTO_CAVITY_MM).extend(0.0);
     let length = gate.at.truncate().distance(gate.sprue_axis) + RUNNER_INTO_CAVITY_MM;
     (from, dir, length)
+}
+
+/// How far (mm) the point `q` lies from the runner's side, seen from
+/// above: a bolt hole runs through the runner's height.
+fn runner_gap(gate: &Gate, q: DVec2) -> f64 {
+    let (from, dir, length) = runner_span(gate);
+    let along = (q - from.truncate()).dot(dir).clamp(0.0, length);
+    q.distance(from.truncate() + dir * along) - gate.radius
 }
 
 /// The block's footprint rectangle.
