@@ -305,7 +305,23 @@ impl BaseSection<'_> {
             BaseSection::Lens(arc) => crate::lens::columns_for(arc.radius, 2.0 * arc.half_angle, e),
             BaseSection::Band { .. } => {
                 let sag = (self.point(0.5) - 0.5 * (self.point(0.0) + self.point(1.0))).length();
-                ((sag / e).sqrt().ceil() as usize).max(1)
+                let by_sag = ((sag / e).sqrt().ceil() as usize).max(1);
+                // The middle's sag is the chord error of a band of even
+                // curvature; across an inflection (a band over a bump's
+                // flank, found-1960f672) its halves cancel. The largest
+                // curvature along the band, from second differences, bounds
+                // the error of every column.
+                const STEPS: usize = 16;
+                let pts: Vec<DVec3> = (0..=STEPS)
+                    .map(|j| self.point(j as f64 / STEPS as f64))
+                    .collect();
+                let largest_sag = pts
+                    .windows(3)
+                    .map(|w| (w[1] - 0.5 * (w[0] + w[2])).length())
+                    .fold(0.0, f64::max);
+                // a sag over two steps scales as (2/STEPS)² of the band's
+                let by_curvature = (STEPS as f64 / 2.0 * (largest_sag / e).sqrt()).ceil() as usize;
+                by_sag.max(by_curvature)
             }
         }
     }
