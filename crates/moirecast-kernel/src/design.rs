@@ -573,6 +573,10 @@ impl Design {
         Ok((d, tolerance))
     }
 
+    /// Samples along each edge of the layout for
+    /// [`Design::base_covers_outline`].
+    const BASE_REACH_SAMPLES: usize = 32;
+
     /// The base lies up to d_eff below f, so the surface is needed (and
     /// validated) over a margin around the layout that depends on d_eff,
     /// which with a > 0 depends on the surface out there: grows the margin
@@ -747,8 +751,35 @@ impl Design {
                 "use a larger radius, a smaller layout or a smaller AFOV",
             ));
         }
-        self.margin = dmax + (self.params.base.levels + 2.0) * self.params.period;
+        // The layout beyond the edge must hold the base's own points under
+        // the outline. Where the base lies well inside a tight cylinder, it
+        // spreads less in x than the layout does in u, and d_max of layout
+        // is not enough (found-2edb06875b8a5108: 6.1 mm needed, d = 4.1 mm).
+        let mut reach = dmax;
+        for _ in 0..16 {
+            if self.base_covers_outline(reach) {
+                break;
+            }
+            reach = 1.25 * reach + self.params.period;
+        }
+        self.margin = reach + (self.params.base.levels + 2.0) * self.params.period;
         self.validate_equal_radius_chords()
+    }
+
+    /// Whether the base surface `reach` beyond the layout's edges lies
+    /// beyond the outline, all along each edge (NaN, where the surface is
+    /// not defined out there, does not).
+    fn base_covers_outline(&self, reach: f64) -> bool {
+        let (hw, hh) = (self.params.width / 2.0, self.half_height);
+        let (xl, xr) = self.outline_x;
+        (0..=Self::BASE_REACH_SAMPLES).all(|i| {
+            let s = 2.0 * i as f64 / Self::BASE_REACH_SAMPLES as f64 - 1.0;
+            let (u, v) = (s * hw, s * hh);
+            self.base_surface(-hw - reach, v).x <= xl
+                && self.base_surface(hw + reach, v).x >= xr
+                && self.base_surface(u, -hh - reach).y <= -hh
+                && self.base_surface(u, hh + reach).y >= hh
+        })
     }
 
     /// Equal-radius lenses must span their chords (a lens of radius r

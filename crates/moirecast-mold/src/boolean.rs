@@ -8,6 +8,7 @@ use manifold_rust::linalg::Vec3;
 use manifold_rust::manifold::Manifold;
 use manifold_rust::types::{Error, MeshGL64};
 use moirecast_kernel::Mesh;
+use std::collections::BTreeSet;
 
 /// Facets on a full circle of a channel, key or bolt hole: 0.4 % radial
 /// error, and the channels are not optical faces.
@@ -102,11 +103,90 @@ fn import(what: &str, mesh: &Mesh, runs: Option<Runs>) -> Result<Manifold> {
 }
 
 /// A mesh exported from manifold, with the source of every triangle.
+#[derive(Clone)]
 pub struct Traced {
     pub mesh: Mesh,
     /// For each triangle: the original ID of the mesh it came from, and its
     /// face ID there.
     pub source: Vec<(u32, u64)>,
+}
+
+impl Traced {
+    /// Collapses each edge shorter than `eps` (mm) whose collapse keeps the
+    /// mesh a 2-manifold (its ends share exactly the two vertices opposite
+    /// it), into the end that is already an f32 point if one is. It is
+    /// the last resort for a sliver manifold's `simplify` keeps, as on a
+    /// rim where a channel's polygon meets another cut (found-a10d1e0cd9365149:
+    /// two rim vertices 4.5e-7 mm apart that round to one f32 point). The
+    /// shape moves by at most `eps`.
+    pub fn collapse_short_edges(self, eps: f64) -> Traced {
+        let Traced { mesh, source } = self;
+        let pos = &mesh.positions;
+        let mut around: Vec<Vec<u32>> = vec![Vec::new(); pos.len()];
+        for (k, t) in mesh.triangles.iter().enumerate() {
+            for &v in t {
+                around[v as usize].push(k as u32);
+            }
+        }
+        let ring = |v: u32| -> BTreeSet<u32> {
+            around[v as usize]
+                .iter()
+                .flat_map(|&k| mesh.triangles[k as usize])
+                .filter(|&w| w != v)
+                .collect()
+        };
+        let mut into: Vec<u32> = (0..pos.len() as u32).collect();
+        let mut touched = vec![false; pos.len()];
+        for t in &mesh.triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                if a > b || pos[a as usize].distance(pos[b as usize]) >= eps {
+                    continue;
+                }
+                let (ring_a, ring_b) = (ring(a), ring(b));
+                if [a, b]
+                    .iter()
+                    .chain(&ring_a)
+                    .chain(&ring_b)
+                    .any(|&v| touched[v as usize])
+                    || ring_a.intersection(&ring_b).count() != 2
+                {
+                    continue;
+                }
+                let (keep, gone) = if f32_exact(pos[b as usize]) == pos[b as usize] {
+                    (b, a)
+                } else {
+                    (a, b)
+                };
+                into[gone as usize] = keep;
+                for v in [a, b].into_iter().chain(ring_a).chain(ring_b) {
+                    touched[v as usize] = true;
+                }
+            }
+        }
+        // drop the collapsed triangles and the vertices no triangle uses
+        let mut index = vec![u32::MAX; pos.len()];
+        let mut out = Traced {
+            mesh: Mesh::default(),
+            source: Vec::new(),
+        };
+        for (t, s) in mesh.triangles.iter().zip(source) {
+            let t = t.map(|v| into[v as usize]);
+            if t[0] == t[1] || t[1] == t[2] || t[2] == t[0] {
+                continue;
+            }
+            let t = t.map(|v| {
+                if index[v as usize] == u32::MAX {
+                    index[v as usize] = out.mesh.positions.len() as u32;
+                    out.mesh.positions.push(pos[v as usize]);
+                }
+                index[v as usize]
+            });
+            out.mesh.triangles.push(t);
+            out.source.push(s);
+        }
+        out
+    }
 }
 
 pub fn to_mesh(m: &Manifold) -> Traced {

@@ -96,7 +96,16 @@ fn sliver_free(
         .iter()
         .fold(0.0f64, |m, p| m.max(p.abs().max_element()));
     let f32_spacing = extent as f32 - (extent as f32).next_down();
-    collapsed((4.0 * f32_spacing as f64).max(2.0 * SLIVER_MM))
+    let eps = (4.0 * f32_spacing as f64).max(2.0 * SLIVER_MM);
+    let again = checked(format!("{what}, slivers collapsed"), half.simplify(eps))?;
+    let Some(traced) = join(to_mesh(&again)) else {
+        return Ok(None);
+    };
+    let done = checked_half(traced.clone());
+    if !has_slivers(done.solid.checks()) {
+        return Ok(Some(done));
+    }
+    Ok(Some(checked_half(traced.collapse_short_edges(eps))))
 }
 
 /// The bottom and top rings of a vertical key frustum over `centre`, as

@@ -20,6 +20,14 @@ const RUNNER_INTO_CAVITY_MM: f64 = 0.02;
 /// under it, so that it opens through the parting surface in one disk.
 const SPRUE_BELOW_SKIRT_MM: f64 = 0.05;
 
+/// Clearance of a vent's foot under the cavity's ceiling and above the
+/// skirt or the floor, where the ceiling's ripple moves the foot (mm).
+const VENT_FOOT_GAP_MM: f64 = 0.02;
+
+/// Rings and spokes of the samples over a vent's disk.
+const VENT_DISK_RINGS: usize = 8;
+const VENT_DISK_SPOKES: usize = 48;
+
 /// The gate on the device's wall at the parting line, the runner that feeds
 /// it and the sprue above the runner's far end.
 #[derive(Clone, Debug)]
@@ -110,6 +118,72 @@ fn sprue_bottom_z(mid: &Polyline, t_g: f64, (r_g, r_s): (f64, f64), m_g: f64) ->
     } else {
         skirt_low - SPRUE_BELOW_SKIRT_MM
     }
+}
+
+/// The fix for a gate that does not fit: the widest that does, or, where
+/// that is under the smallest gate the spec takes, a thicker device.
+fn gate_fix(widest: f64) -> String {
+    let smallest = crate::params::limits::GATE_DIAMETER.0;
+    let widest = (widest * 100.0).floor() / 100.0;
+    if widest >= smallest {
+        format!("set mold.gate_diameter to at most {widest:.2} mm")
+    } else {
+        format!(
+            "the walls are too thin there for the smallest gate ({smallest} mm): make the device thicker at its walls (a larger base.d, or deeper lenses)"
+        )
+    }
+}
+
+/// Margin on the runner's circle for [`runner_cuts_island`] (mm): the
+/// runner is a polygon, a little inside its circle.
+const RUNNER_ISLAND_MARGIN_MM: f64 = 0.01;
+
+/// Samples across a runner's width for [`runner_cuts_island`], besides the
+/// parting line's own breakpoints.
+const RUNNER_WIDTH_SAMPLES: usize = 256;
+
+/// Whether a runner of radius `r` centred at height `m_g` on the parting
+/// line `mid` (carried straight out from the wall, so the same in every
+/// cross-section) leaves a loose sliver of a half: the parting line rising
+/// over the runner's top (or dipping under its floor) and coming back
+/// inside the runner's width. Such a stretch does not reach the runner's
+/// sides, where the half's material would hold it (found-71819e0da782288f:
+/// a second shell of the bottom half along the runner).
+fn runner_cuts_island(mid: &Polyline, t_g: f64, m_g: f64, r: f64) -> bool {
+    let (a, b) = (t_g - r, t_g + r);
+    let mut ts: Vec<f64> = (0..=RUNNER_WIDTH_SAMPLES)
+        .map(|k| a + (b - a) * k as f64 / RUNNER_WIDTH_SAMPLES as f64)
+        .chain(mid.t.iter().copied().filter(|&t| t > a && t < b))
+        .collect();
+    ts.sort_by(f64::total_cmp);
+    // +1 over the top, -1 under the floor, 0 inside the circle
+    let side = |t: f64| {
+        let half = (r * r - (t - t_g) * (t - t_g)).max(0.0).sqrt();
+        let z = mid.eval(t);
+        if z > m_g + half - RUNNER_ISLAND_MARGIN_MM {
+            1
+        } else if z < m_g - half + RUNNER_ISLAND_MARGIN_MM {
+            -1
+        } else {
+            0
+        }
+    };
+    let sides: Vec<i32> = ts.iter().map(|&t| side(t)).collect();
+    // a run of +1 (or -1) that touches neither end of the width is loose
+    let (first, last) = (sides[0], sides[sides.len() - 1]);
+    let mut k = 0;
+    while k < sides.len() {
+        let s = sides[k];
+        let start = k;
+        while k < sides.len() && sides[k] == s {
+            k += 1;
+        }
+        let touches_end = (start == 0 && s == first) || (k == sides.len() && s == last);
+        if s != 0 && !touches_end {
+            return true;
+        }
+    }
+    false
 }
 
 /// A smooth (lens-ripple-free) surface of the posed device on a grid over
@@ -467,10 +541,23 @@ impl Site<'_> {
                     gate_wall.name(),
                     top_min - bottom_max
                 ),
+                gate_fix(2.0 * room),
+            ));
+        }
+        if runner_cuts_island(&wc.mid, t_g, m_g, r_g) {
+            let fits = std::iter::successors(Some(r_g), |r| Some(r * 0.9))
+                .take_while(|&r| r > 1e-3)
+                .find(|&r| !runner_cuts_island(&wc.mid, t_g, m_g, r));
+            return Err(misfit(
+                "gate-fits-wall",
+                Some(MoldParam::GateDiameter),
+                at,
                 format!(
-                    "set mold.gate_diameter to at most {:.2} mm",
-                    (2.0 * room).max(0.0)
+                    "the parting line on the {} wall rises over a runner {} mm wide and falls back inside its width: a sliver of the mold would come loose between them",
+                    gate_wall.name(),
+                    p.gate_diameter
                 ),
+                gate_fix(fits.map_or(0.0, |r| 2.0 * r)),
             ));
         }
         let out = gate_wall.outward();
@@ -660,6 +747,10 @@ impl Site<'_> {
                     }
                 }
             };
+            let vent = Vent {
+                foot_z: self.vent_foot(&vent, (upper, lower))?,
+                ..vent
+            };
             // Plateaus next to each other share a vent.
             if vents
                 .iter()
@@ -670,6 +761,80 @@ impl Site<'_> {
             vents.push(vent);
         }
         Ok(vents)
+    }
+
+    /// The vent's foot: where `vent` puts it (a wall's upper quarter, or
+    /// the device's middle under a maximum) unless the cavity's ceiling dips
+    /// below that somewhere over the vent's disk. On a thin wall the lenses'
+    /// ripple does, and the vent would open into the cavity in two places:
+    /// a handle of the top half (tests/design-corpus/found-b2de7d0aad0f8feb.toml).
+    /// Then the foot drops under the lowest ceiling over the disk. It also
+    /// rises over the skirt and the floor under the disk, which a corner
+    /// vent's other wall can carry above a foot set on one wall
+    /// (found-0bc3e504cec33309).
+    fn vent_foot(&self, vent: &Vent, (upper, lower): (&HeightQuery, &HeightQuery)) -> Result<f64> {
+        let (outline, r) = (self.outline, vent.radius);
+        let (mut ceiling, mut below) = (f64::INFINITY, f64::NEG_INFINITY);
+        // The walls the disk crosses: their top and mid curves, exactly.
+        for c in self.walls {
+            let w = c.wall;
+            let (s0, s1) = w.span(&outline);
+            let across = w
+                .outward()
+                .dot(vent.axis - w.point(&outline, 0.0, 0.0).truncate());
+            if across.abs() >= r {
+                continue;
+            }
+            let along = w.along(vent.axis.extend(0.0));
+            let half_chord = (r * r - across * across).sqrt();
+            let (a, b) = ((along - half_chord).max(s0), (along + half_chord).min(s1));
+            if a <= b {
+                ceiling = ceiling.min(c.upper.range(a, b).0);
+                below = below.max(c.mid.range(a, b).1);
+            }
+        }
+        // The disk's inside (ceiling and floor) and outside (the skirt,
+        // each wall's mid curve carried out; flat in the corner squares).
+        for ring in 0..=VENT_DISK_RINGS {
+            let rho = r * ring as f64 / VENT_DISK_RINGS as f64;
+            let spokes = if ring == 0 { 1 } else { VENT_DISK_SPOKES };
+            for k in 0..spokes {
+                let angle = std::f64::consts::TAU * k as f64 / spokes as f64;
+                let q = vent.axis + rho * DVec2::from_angle(angle);
+                if outline.contains(q) {
+                    if let Some(z) = upper.height(q) {
+                        ceiling = ceiling.min(z);
+                    }
+                    if let Some(z) = lower.height(q) {
+                        below = below.max(z);
+                    }
+                    continue;
+                }
+                for c in self.walls {
+                    let w = c.wall;
+                    let across = w.outward().dot(q - w.point(&outline, 0.0, 0.0).truncate());
+                    if across > 0.0 {
+                        let (s0, s1) = w.span(&outline);
+                        below = below.max(c.mid.eval(w.along(q.extend(0.0)).clamp(s0, s1)));
+                    }
+                }
+            }
+        }
+        let (lowest, highest) = (below + VENT_FOOT_GAP_MM, ceiling - VENT_FOOT_GAP_MM);
+        let foot = vent.foot_z.max(lowest).min(highest);
+        if foot < lowest {
+            return Err(misfit(
+                "vent-fits-wall",
+                Some(MoldParam::VentDiameter),
+                vent.axis.extend(foot),
+                format!(
+                    "a vent {} mm wide at ({:.2}, {:.2}) mm spans a dip of the cavity's ceiling to {:.3} mm, within {VENT_FOOT_GAP_MM} mm of the parting surface or the floor under it ({:.3} mm): it would open into the cavity in two places",
+                    self.p.vent_diameter, vent.axis.x, vent.axis.y, ceiling, below
+                ),
+                "make mold.vent_diameter smaller, or the device thicker where its ceiling is highest".into(),
+            ));
+        }
+        Ok(foot)
     }
 
     /// Every vent column rises to the top face inside the block, clear of

@@ -4,6 +4,7 @@
 
 use crate::error::{MoldError, Result};
 use glam::{DAffine3, DMat3, DVec2, DVec3};
+use moirecast_kernel::check::{triangle_altitude, MIN_ALTITUDE_MM};
 use moirecast_kernel::mesher::{Patch, Side};
 use moirecast_kernel::model::LensRef;
 use moirecast_kernel::{Design, DeviceMesh, Mesh};
@@ -77,6 +78,11 @@ pub struct Rect {
 }
 
 impl Rect {
+    /// Whether `p` is strictly inside.
+    pub fn contains(&self, p: DVec2) -> bool {
+        p.x > self.x0 && p.x < self.x1 && p.y > self.y0 && p.y < self.y1
+    }
+
     pub fn grown(&self, by: f64) -> Rect {
         Rect {
             x0: self.x0 - by,
@@ -983,8 +989,75 @@ fn grid_floor(
             Wall::XMax => node.iter().map(|r| r[last_i]).collect(),
         }
     };
-    for w in Wall::ALL {
-        zip_strip(b, skirt.on_wall(w), &inner(w), |p| w.along(p), down);
+    let mut outer: Vec<Vec<DVec3>> = Wall::ALL
+        .iter()
+        .map(|&w| skirt.on_wall(w).to_vec())
+        .collect();
+    // Wall::ALL's order: y-min, x-max, y-max, x-min. Each corner: the walls
+    // meeting there (index, whether at its end) and the inner node nearest.
+    let corners = [
+        ((0, true), (1, false), node[0][last_i]),
+        ((1, true), (2, true), node[last_j][last_i]),
+        ((2, false), (3, true), node[last_j][0]),
+        ((3, false), (0, false), node[0][0]),
+    ];
+    for ((wa, end_a), (wb, end_b), n) in corners {
+        corner_fan(b, &mut outer, (wa, end_a), (wb, end_b), n, down);
+    }
+    for (w, outer) in Wall::ALL.into_iter().zip(&outer) {
+        zip_strip(b, outer, &inner(w), |p| w.along(p), down);
+    }
+}
+
+/// A mid-wall point closer to a corner than this (as the altitude of its
+/// triangle with the corner and the inner node, mm) is fanned to the
+/// corner's other neighbour instead: four times the degenerate-triangle
+/// check's limit, as the walls' zip.
+const CORNER_SLIVER_MM: f64 = 4.0 * MIN_ALTITUDE_MM;
+
+/// Where a wall's mid curve has a point right next to a corner (a base
+/// crease snapped a few hundredths of a micrometre from the side wall),
+/// the ring's triangle from that short edge to the inner node, a cell
+/// away at an angle, is a sliver (found-b5c3fdfbaa3b00af: 7.9e-6 mm). Then
+/// the corner is fanned from its two neighbours, at right angles, and
+/// leaves both walls' chains, which the ring zips from those neighbours.
+fn corner_fan(
+    b: &mut SolidBuilder,
+    outer: &mut [Vec<DVec3>],
+    (wa, end_a): (usize, bool),
+    (wb, end_b): (usize, bool),
+    n: DVec3,
+    down: DVec3,
+) {
+    let near = |chain: &[DVec3], end: bool| {
+        if end {
+            [chain[chain.len() - 1], chain[chain.len() - 2]]
+        } else {
+            [chain[0], chain[1]]
+        }
+    };
+    let ([c, p], [_, q]) = (near(&outer[wa], end_a), near(&outer[wb], end_b));
+    let thinnest = |ts: &[[DVec3; 3]]| {
+        ts.iter()
+            .map(|&t| triangle_altitude(t))
+            .fold(f64::INFINITY, f64::min)
+    };
+    let zipped = thinnest(&[[p, c, n], [q, c, n]]);
+    if zipped >= CORNER_SLIVER_MM
+        || outer[wa].len() < 3
+        || outer[wb].len() < 3
+        || thinnest(&[[p, c, q], [p, q, n]]) <= zipped
+    {
+        return;
+    }
+    b.triangle(p, c, q, down);
+    b.triangle(p, q, n, down);
+    for (w, end) in [(wa, end_a), (wb, end_b)] {
+        if end {
+            outer[w].pop();
+        } else {
+            outer[w].remove(0);
+        }
     }
 }
 

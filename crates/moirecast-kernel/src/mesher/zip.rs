@@ -69,7 +69,17 @@ pub(super) fn zip(
             };
             let folds = !faces_out(preferred);
             let thin = thickness(preferred);
-            let sliver = thin < WALL_SLIVER_MM && thickness(other) > thin;
+            // the preferred triangle's short edge, fanned instead from the
+            // next vertex of the other side: deferring it only helps if that
+            // is thicker (else the deferral repeats to the strip's far end
+            // and fans the edge from there: found-986991dc2071040e)
+            let deferred = if nearer {
+                [a[i], a[i + 1], b[j + 1]]
+            } else {
+                [a[i + 1], b[j + 1], b[j]]
+            };
+            let sliver =
+                thin < WALL_SLIVER_MM && thickness(other) > thin && thickness(deferred) > thin;
             nearer != ((folds || sliver) && faces_out(other))
         };
         let tri = if advance_a {
