@@ -137,6 +137,8 @@ type Extent = ((f64, f64), (f64, f64));
 struct ArcRow {
     arcs: Vec<Arc2>,
     blocks: Vec<Extent>,
+    /// The row's z extent: a ray outside it meets nothing.
+    z: (f64, f64),
 }
 
 /// The union of two extents.
@@ -148,26 +150,56 @@ const EMPTY: (f64, f64) = (f64::INFINITY, f64::NEG_INFINITY);
 
 impl ArcRow {
     fn new(arcs: Vec<Arc2>) -> ArcRow {
-        let blocks = arcs
+        let blocks: Vec<Extent> = arcs
             .chunks(BLOCK)
             .map(|c| {
                 c.iter()
                     .fold((EMPTY, EMPTY), |(x, z), a| (union(x, a.x), union(z, a.z)))
             })
             .collect();
-        ArcRow { arcs, blocks }
+        let z = blocks.iter().fold(EMPTY, |z, b| union(z, b.1));
+        ArcRow { arcs, blocks, z }
     }
 
-    /// The nearest meeting among the arcs whose x extent overlaps [x0, x1],
-    /// walked from the ray's start in the direction it travels, stopping
-    /// past the nearest meeting found.
+    /// The nearest meeting in (`t_min`, `t_max`] within `walls` (x), among
+    /// the arcs the ray passes inside the row's z extent: walked from the
+    /// ray's start in the direction it travels, stopping past the nearest
+    /// meeting found. (A meeting beyond the walls is the caller's to drop.)
     fn meet(
         &self,
         (o, d): (DVec2, DVec2),
-        t_min: f64,
+        (t_min, t_max): (f64, f64),
         side: Side,
-        (x0, x1): (f64, f64),
+        walls: (f64, f64),
     ) -> Option<(f64, DVec2)> {
+        // the stretch of the ray inside the row's z extent, and its x range
+        let (t0, t1) = if d.y == 0.0 {
+            if o.y < self.z.0 || o.y > self.z.1 {
+                return None;
+            }
+            (f64::NEG_INFINITY, f64::INFINITY)
+        } else {
+            let (a, b) = ((self.z.0 - o.y) / d.y, (self.z.1 - o.y) / d.y);
+            (a.min(b), a.max(b))
+        };
+        let (t0, t1) = (t0.max(t_min), t1.min(t_max));
+        if t0 > t1 {
+            return None;
+        }
+        let x_at = |t: f64| {
+            if t.is_finite() {
+                o.x + t * d.x
+            } else if (d.x >= 0.0) == (t > 0.0) {
+                f64::INFINITY
+            } else {
+                f64::NEG_INFINITY
+            }
+        };
+        let (xa, xb) = (x_at(t0), x_at(t1));
+        let (x0, x1) = (xa.min(xb).max(walls.0), xa.max(xb).min(walls.1));
+        if x0 > x1 {
+            return None;
+        }
         let forward = d.x >= 0.0;
         // the ray's z over an x extent must overlap the z extent
         let slope = d.y / d.x;
@@ -263,10 +295,6 @@ impl ArcRow {
         }
         i
     }
-
-    fn z_extent(&self) -> (f64, f64) {
-        self.blocks.iter().fold(EMPTY, |z, b| union(z, b.1))
-    }
 }
 
 /// The cross-section of a dual-lens device at one station v: its revealer
@@ -280,8 +308,6 @@ pub struct Section {
     /// Each wall's z extent, from the base to the revealer's crease there:
     /// the wall itself, a vertical segment (the mesh's x-walls are planes).
     wall_z: [(f64, f64); 2],
-    /// The section's z extent: a ray outside it meets nothing.
-    z: (f64, f64),
 }
 
 impl Section {
@@ -355,7 +381,6 @@ impl Section {
             })
             .collect();
         let (top, base) = (ArcRow::new(top), ArcRow::new(base));
-        let (t, b) = (top.z_extent(), base.z_extent());
         // a wall runs from the base arc under it up to the revealer's crease
         let wall_z = |u: f64| {
             let (x, top_z) = (x_of(u), design.surface().point(u, v).z);
@@ -369,7 +394,6 @@ impl Section {
         Ok(Section {
             walls,
             wall_z: [wall_z(-hw), wall_z(hw)],
-            z: (t.0.min(b.0), t.1.max(b.1)),
             top,
             base,
         })
@@ -379,46 +403,8 @@ impl Section {
 impl Surfaces for Section {
     fn meet(&self, side: Side, origin: DVec3, dir: DVec3, t_min: f64) -> Option<Meeting> {
         let (o, d) = (in_plane(origin), DVec2::new(dir.x, dir.z));
-        // the stretch of the ray inside the section's z extent
-        let (mut t0, mut t1) = if d.y == 0.0 {
-            if o.y < self.z.0 || o.y > self.z.1 {
-                return None;
-            }
-            (f64::NEG_INFINITY, f64::INFINITY)
-        } else {
-            let (a, b) = ((self.z.0 - o.y) / d.y, (self.z.1 - o.y) / d.y);
-            (a.min(b), a.max(b))
-        };
-        t0 = t0.max(t_min);
-        if t0 > t1 {
-            return None;
-        }
-        // and its x range, within the walls
-        let x_at = |t: f64| {
-            if t.is_finite() {
-                o.x + t * d.x
-            } else if (d.x >= 0.0) == (t > 0.0) {
-                f64::INFINITY
-            } else {
-                f64::NEG_INFINITY
-            }
-        };
-        t1 = t1.max(t0);
-        let (xa, xb) = (x_at(t0), x_at(t1));
-        let range = (xa.min(xb).max(self.walls.0), xa.max(xb).min(self.walls.1));
-        let range = if range.0 > range.1 {
-            (range.0, range.0)
-        } else {
-            range
-        };
-        let within = |hit: &(f64, DVec2)| {
-            let x = o.x + hit.0 * d.x;
-            x >= self.walls.0 && x <= self.walls.1
-        };
-        let top = self.top.meet((o, d), t_min, side, range).filter(within);
-        let base = self.base.meet((o, d), t_min, side, range).filter(within);
         // the walls: entered from outside, left from inside
-        let walls = [(self.walls.0, -1.0), (self.walls.1, 1.0)]
+        let wall = [(self.walls.0, -1.0), (self.walls.1, 1.0)]
             .into_iter()
             .zip(self.wall_z)
             .filter_map(|((x, outward), (z0, z1))| {
@@ -429,12 +415,34 @@ impl Surfaces for Section {
                     Side::Inside => d.x * outward > 0.0,
                 };
                 (t > t_min && facing && z >= z0 && z <= z1).then_some((t, DVec2::new(outward, 0.0)))
-            });
-        let nearest = [top, base]
-            .into_iter()
-            .flatten()
-            .chain(walls)
+            })
             .min_by(|a, b| a.0.total_cmp(&b.0));
+        let within = |hit: &(f64, DVec2)| {
+            let x = o.x + hit.0 * d.x;
+            x >= self.walls.0 && x <= self.walls.1
+        };
+        // The row the ray more likely meets first is searched first, and
+        // the other only before that meeting: a ray going down inside
+        // meets the base, any other the revealer (from above, or from
+        // inside going up), and a ray that meets the revealer first passes
+        // the base's z extent only after it, so that search is empty.
+        let (first, second) = if side == Side::Inside && d.y < 0.0 {
+            (&self.base, &self.top)
+        } else {
+            (&self.top, &self.base)
+        };
+        let mut nearest = wall;
+        for row in [first, second] {
+            let t_max = nearest.map_or(f64::INFINITY, |(t, _)| t);
+            if let Some(hit) = row
+                .meet((o, d), (t_min, t_max), side, self.walls)
+                .filter(within)
+            {
+                if nearest.is_none_or(|n| hit.0 < n.0) {
+                    nearest = Some(hit);
+                }
+            }
+        }
         nearest.map(|(t, n)| Meeting {
             t,
             normal: DVec3::new(n.x, 0.0, n.y),
@@ -526,7 +534,8 @@ impl<'d> Sections<'d> {
         for r in 0..self.rows.len() {
             let s = self.section(r)?;
             (lo.x, hi.x) = (lo.x.min(s.walls.0), hi.x.max(s.walls.1));
-            (lo.z, hi.z) = (lo.z.min(s.z.0), hi.z.max(s.z.1));
+            let z = union(s.top.z, s.base.z);
+            (lo.z, hi.z) = (lo.z.min(z.0), hi.z.max(z.1));
         }
         Some((lo, hi))
     }
