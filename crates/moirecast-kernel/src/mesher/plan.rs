@@ -30,6 +30,10 @@ const COMPRESSION_SLACK: f64 = 0.95;
 /// [`split_where_curvature_peaks`] splits it: the tolerance's margin
 /// (1 − [`ACROSS_SHARE`] − [`ALONG_SHARE`]) takes a quarter of the along share.
 const PEAK_SLACK: f64 = 1.25;
+/// Chordal error across a lens (as a share of the tolerance) that a row's
+/// shear (see [`sheared_columns`]) may add before the lens gets more
+/// columns: a small part of the tolerance's margin.
+const SHEAR_SLACK: f64 = 0.02;
 /// Cells of the curvature survey along y.
 const SURVEY_CELLS: usize = 256;
 /// Most cells of the base's survey, however fine its profile.
@@ -229,10 +233,82 @@ struct LensSurvey {
     ys: Vec<f64>,
     /// The first crease point at each station.
     first: Vec<DVec3>,
+    /// How far (in v) a row solved onto the first and the last station's
+    /// y reaches beyond that station, at most across the lens: where the
+    /// lens's bulge leans in y, its middle lies off its creases' y.
+    overshoot: (f64, f64),
 }
 
 struct Planner<'a> {
     design: &'a Design,
+}
+
+/// Overshoot (as a share of the first or last row spacing) the edge rows
+/// may add to that spacing before a station is put in: a tenth more
+/// spacing is a fifth more chordal error along, within the margin.
+const OVERSHOOT_SLACK: f64 = 0.1;
+
+/// The revealer's first and last rows are solved onto y = ±H/2, and where
+/// the lenses' bulge leans in y their middles lie `overshoot` (lo, hi) of
+/// station beyond the edge: the strip to the next station is that much
+/// wider there than planned (found-1a8d59fd9f631a5f: 0.138 mm on a
+/// 0.16 mm spacing at a paraboloid's edge, 9 % over the tolerance). A
+/// station is put in so that the strip is no wider than planned, where
+/// the overshoot is less than the spacing.
+fn edge_stations(rows: &mut Vec<f64>, (lo, hi): (f64, f64)) {
+    let n = rows.len();
+    if n < 2 {
+        return;
+    }
+    let (first, last) = (rows[1] - rows[0], rows[n - 1] - rows[n - 2]);
+    if hi > OVERSHOOT_SLACK * last && hi < last {
+        rows.insert(n - 1, rows[n - 1] - (last - hi));
+    }
+    if lo > OVERSHOOT_SLACK * first && lo < first {
+        rows.insert(1, rows[0] + (first - lo));
+    }
+}
+
+/// The columns a lens needs, from the `columns` its station arcs need for
+/// the across share `e_across`, where its rows shear. Rows are placed in y,
+/// and a lens whose bulge leans in y (under a normal that leans along v)
+/// runs across a row through stations v(t), dv/dt = −(∂y/∂t)/(∂y/∂v). A
+/// row's chord then also bends with the lens's curvature along v and its
+/// twist: |f_tt| + |f_vv|·v′² + 2·|f_tv|·|v′| in place of |f_tt| (found-
+/// 9b26cfc8245536c2, a base 3.4 mm under a plane sloping 0.54 along y,
+/// v′ = 0.45: 15 % over the tolerance; found-1a8d59fd9f631a5f, the
+/// revealer at a paraboloid's edge). `pts[s][j]` are the lens's points at
+/// `TS` even t on stations `h` apart.
+fn sheared_columns<const TS: usize>(
+    pts: &[[DVec3; TS]],
+    h: f64,
+    columns: usize,
+    e_across: f64,
+) -> usize {
+    let dt = 1.0 / (TS - 1) as f64;
+    let (mut shear_err, mut scale) = (0.0f64, 1.0f64);
+    for s in 1..pts.len().saturating_sub(1) {
+        for j in 1..TS - 1 {
+            let (p, up, down) = (pts[s], pts[s + 1], pts[s - 1]);
+            let ftt = (p[j + 1] - 2.0 * p[j] + p[j - 1]).length() / (dt * dt);
+            let fvv = (up[j] - 2.0 * p[j] + down[j]).length() / (h * h);
+            let ftv =
+                ((up[j + 1] - down[j + 1]) - (up[j - 1] - down[j - 1])).length() / (4.0 * h * dt);
+            let dy_dv = ((up[j].y - down[j].y) / (2.0 * h))
+                .abs()
+                .max(COMPRESSION_SLACK);
+            let shear = ((p[j + 1].y - p[j - 1].y) / (2.0 * dt)).abs() / dy_dv;
+            let added = fvv * shear * shear + 2.0 * ftv * shear;
+            shear_err = shear_err.max(added / (8.0 * (columns * columns) as f64));
+            if ftt > 0.0 {
+                scale = scale.max(1.0 + added / ftt);
+            }
+        }
+    }
+    if shear_err <= SHEAR_SLACK * e_across / ACROSS_SHARE {
+        return columns;
+    }
+    (columns as f64 * scale.sqrt()).ceil() as usize
 }
 
 impl<'a> Planner<'a> {
@@ -294,6 +370,7 @@ impl<'a> Planner<'a> {
                 std::array::from_fn(|j| section.point(j as f64 / (TS - 1) as f64))
             })
             .collect();
+        let columns = sheared_columns(&pts, h, columns, ACROSS_SHARE * self.tol());
         let dt = 1.0 / columns as f64;
         let n = pts.len();
         let mut k_eff = vec![0.0; n];
@@ -338,11 +415,27 @@ impl<'a> Planner<'a> {
             k_eff[0] = k_eff[1];
             k_eff[n - 1] = k_eff[n - 2];
         }
+        // first order: a point dy off its crease's y is dy / (dy/dv) of
+        // station away from the row through the crease
+        let overshoot = |end: usize, next: usize, outward: f64| {
+            let (p, q) = (&pts[end], &pts[next]);
+            (0..TS)
+                .map(|j| {
+                    let dy_dv = ((q[j].y - p[j].y) / h).abs().max(COMPRESSION_SLACK);
+                    outward * (p[0].y - p[j].y) / dy_dv
+                })
+                .fold(0.0, f64::max)
+        };
         LensSurvey {
             columns,
             k_eff,
             ys: pts.iter().map(|p| p[0].y).collect(),
             first: pts.iter().map(|p| p[0]).collect(),
+            overshoot: if n > 1 {
+                (overshoot(0, 1, -1.0), overshoot(n - 1, n - 2, 1.0))
+            } else {
+                (0.0, 0.0)
+            },
         }
     }
 
@@ -372,13 +465,17 @@ impl<'a> Planner<'a> {
         let kmax = k.iter().cloned().fold(0.0, f64::max);
         // At least one interior station row, so every lens has an exact arc
         // in the mesh to measure.
-        let rows = rows_from_curvature(
+        let mut rows = rows_from_curvature(
             -d.half_height,
             d.half_height,
             &k,
             ALONG_SHARE * self.tol(),
             2,
         );
+        let overshoot = surveys.iter().fold((0.0f64, 0.0f64), |(lo, hi), s| {
+            (lo.max(s.overshoot.0), hi.max(s.overshoot.1))
+        });
+        edge_stations(&mut rows, overshoot);
         (columns, rows, kmax)
     }
 
