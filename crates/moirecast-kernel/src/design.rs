@@ -852,9 +852,51 @@ impl Design {
                 format!("use levels ≤ {max_levels:.3}, or more profile blur"),
             ));
         }
+        self.validate_leaning_lenses(a_t)
+    }
+
+    /// Base lenses leaning over themselves. A crease slanted in xy (the
+    /// shift changing along v: dx/dv = s = A·T·∂e/∂v / (1 − A·T·∂e/∂u))
+    /// under a normal that leans in y moves the lens's flanks, bulging
+    /// along −n, in y against its slant: the lens overhangs itself once
+    /// |s·n_y|·tan(β/2) reaches 1 (β the base lenses' AFOV), and the device
+    /// is no longer a graph over xy (found-94ef9d50cd986eb0: a plane
+    /// sloping 53° along y, 6 levels of a gray image). Held below
+    /// [`limits::MAX_SHIFT_SLOPE`] like the slope along u.
+    fn validate_leaning_lenses(&self, a_t: f64) -> Result<(), DesignError> {
+        let tan_half = match self.base_rule {
+            ArcRule::ConstantAfov { half_angle } => half_angle.tan(),
+            ArcRule::EqualRadius { .. } => return Ok(()),
+        };
+        let worst = self
+            .grid(LEAN_GRID_CELLS)
+            .map(|q| {
+                let (_, grad) = self.params.profile.value_grad(q.x, q.y);
+                let slant = a_t * grad.y / (1.0 - a_t * grad.x).max(1.0 - limits::MAX_SHIFT_SLOPE);
+                (
+                    (slant * self.surface().normal(q.x, q.y).y).abs() * tan_half,
+                    q,
+                )
+            })
+            .fold((0.0f64, DVec2::ZERO), |a, b| if b.0 > a.0 { b } else { a });
+        if worst.0 >= limits::MAX_SHIFT_SLOPE {
+            let max_levels = self.params.base.levels * limits::MAX_SHIFT_SLOPE / worst.0;
+            return Err(err(
+                Param::Levels,
+                self.params.base.levels,
+                format!(
+                    "the base lenses lean over themselves: their creases slant across the layout (the elevation changes along v) under a surface that slopes along y, |s·n_y|·tan(β/2) = {:.3} at layout ({:.1}, {:.1}) mm; it must stay below {}, or the device is no graph over xy",
+                    worst.0, worst.1.x, worst.1.y, limits::MAX_SHIFT_SLOPE
+                ),
+                format!("use levels ≤ {max_levels:.3}, more profile blur, or a surface that slopes less along y"),
+            ));
+        }
         Ok(())
     }
 }
+
+/// Cells per side of the grid [`Design::validate_leaning_lenses`] samples.
+const LEAN_GRID_CELLS: usize = 128;
 
 #[cfg(test)]
 mod tests {

@@ -118,8 +118,24 @@ impl Traced {
     /// the last resort for a sliver manifold's `simplify` keeps, as on a
     /// rim where a channel's polygon meets another cut (found-a10d1e0cd9365149:
     /// two rim vertices 4.5e-7 mm apart that round to one f32 point). The
-    /// shape moves by at most `eps`.
+    /// shape moves by at most `eps`. A pass leaves the edges next to one it
+    /// collapsed for the next pass (found-843101dca9a486a4), up to
+    /// [`COLLAPSE_PASSES`].
     pub fn collapse_short_edges(self, eps: f64) -> Traced {
+        let mut traced = self;
+        for _ in 0..COLLAPSE_PASSES {
+            let (next, collapsed) = traced.collapse_pass(eps);
+            traced = next;
+            if collapsed == 0 {
+                break;
+            }
+        }
+        traced
+    }
+
+    /// One pass of [`Traced::collapse_short_edges`]: the mesh, and how many
+    /// edges it collapsed.
+    fn collapse_pass(self, eps: f64) -> (Traced, usize) {
         let Traced { mesh, source } = self;
         let pos = &mesh.positions;
         let mut around: Vec<Vec<u32>> = vec![Vec::new(); pos.len()];
@@ -136,6 +152,7 @@ impl Traced {
                 .collect()
         };
         let mut into: Vec<u32> = (0..pos.len() as u32).collect();
+        let mut collapsed = 0;
         let mut touched = vec![false; pos.len()];
         for t in &mesh.triangles {
             for k in 0..3 {
@@ -159,6 +176,7 @@ impl Traced {
                     (a, b)
                 };
                 into[gone as usize] = keep;
+                collapsed += 1;
                 for v in [a, b].into_iter().chain(ring_a).chain(ring_b) {
                     touched[v as usize] = true;
                 }
@@ -185,9 +203,12 @@ impl Traced {
             out.mesh.triangles.push(t);
             out.source.push(s);
         }
-        out
+        (out, collapsed)
     }
 }
+
+/// Passes of [`Traced::collapse_short_edges`] at most.
+const COLLAPSE_PASSES: usize = 8;
 
 pub fn to_mesh(m: &Manifold) -> Traced {
     let g = m.get_mesh_gl64(0);

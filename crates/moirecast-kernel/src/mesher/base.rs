@@ -244,6 +244,10 @@ pub(super) fn strips(
         .collect()
 }
 
+/// Samples along a lens for the start of a wall cut where a crease's x
+/// is not known.
+const CUT_SCAN: usize = 16;
+
 /// Computes one base row at exact height y: crease vertices, cut vertices on
 /// the x-walls and interior vertices, each solved onto its exact surface.
 fn base_row(
@@ -299,16 +303,41 @@ fn base_row(
             .get(&k)
             .ok_or_else(|| KernelError::Solver(format!("base lens {k} was not surveyed")))?;
         let cut = |wall: f64, t0: f64| -> Result<(DVec3, VertexOrigin, f64)> {
-            let guess = DVec2::new(t0, 0.5 * (c0.0 + c1.0));
-            let p = newton_2d(
-                guess,
-                &|| format!("base lens {k} meeting the wall x = {wall} at y = {y}"),
-                |q| {
-                    d.base_point(k, q.x, q.y)
-                        .map(|p| DVec2::new(p.x - wall, p.y - y))
-                        .unwrap_or(DVec2::NAN)
-                },
-            )?;
+            let what = || format!("base lens {k} meeting the wall x = {wall} at y = {y}");
+            // a crease beyond the extended layout has x = ±∞: the lens's
+            // own points say where along it the wall is (found-
+            // 2f6764c926fcd185: a base lens 7.4 mm wide reaching into a
+            // layout 0.8 mm wide from beyond its margin)
+            let t0 = if t0.is_finite() {
+                t0
+            } else {
+                (0..=CUT_SCAN)
+                    .map(|j| j as f64 / CUT_SCAN as f64)
+                    .filter_map(|t| {
+                        let x = d.base_point(k, t, y).ok()?.x;
+                        x.is_finite().then_some(((x - wall).abs(), t))
+                    })
+                    .min_by(|a, b| a.0.total_cmp(&b.0))
+                    .map_or(0.5, |(_, t)| t)
+            };
+            let g = |q: DVec2| {
+                d.base_point(k, q.x, q.y)
+                    .map(|p| DVec2::new(p.x - wall, p.y - y))
+                    .unwrap_or(DVec2::NAN)
+            };
+            // from the creases' mean station, else from the row's y and
+            // from each crease's station: a lens 7 mm wide whose creases
+            // solve to stations far apart can send Newton off from their
+            // mean (found-2f6764c926fcd185)
+            let p = [
+                DVec2::new(t0, 0.5 * (c0.0 + c1.0)),
+                DVec2::new(t0, y),
+                DVec2::new(t0, c0.0),
+                DVec2::new(t0, c1.0),
+            ]
+            .into_iter()
+            .find_map(|guess| newton_2d(guess, &what, g).ok())
+            .ok_or_else(|| KernelError::Solver(what()))?;
             let pt = d.base_point(k, p.x, p.y)?;
             Ok((pt, VertexOrigin::BaseLens { k, t: p.x, v: p.y }, p.x))
         };
