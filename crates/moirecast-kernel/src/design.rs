@@ -576,6 +576,9 @@ impl Design {
     /// Samples along each edge of the layout for
     /// [`Design::base_covers_outline`].
     const BASE_REACH_SAMPLES: usize = 32;
+    /// Growth steps (×1.25 plus a period each) of the layout beyond its
+    /// edge before [`Design::settle_margin`] takes over.
+    const BASE_REACH_STEPS: usize = 16;
 
     /// The base lies up to d_eff below f, so the surface is needed (and
     /// validated) over a margin around the layout that depends on d_eff,
@@ -756,7 +759,7 @@ impl Design {
         // spreads less in x than the layout does in u, and d_max of layout
         // is not enough (found-2edb06875b8a5108: 6.1 mm needed, d = 4.1 mm).
         let mut reach = dmax;
-        for _ in 0..16 {
+        for _ in 0..Self::BASE_REACH_STEPS {
             if self.base_covers_outline(reach) {
                 break;
             }

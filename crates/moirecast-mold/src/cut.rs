@@ -77,11 +77,11 @@ fn sliver_free(
     if shortest >= SLIVER_MM && !has_slivers(done.solid.checks()) {
         return Ok(Some(done));
     }
-    let collapsed = |eps: f64| -> Result<Option<Half>> {
+    let simplified = |eps: f64| -> Result<Option<boolean::Traced>> {
         let half = checked(format!("{what}, slivers collapsed"), half.simplify(eps))?;
-        Ok(join(to_mesh(&half)).map(checked_half))
+        Ok(join(to_mesh(&half)))
     };
-    let done = collapsed(SLIVER_MM)?;
+    let done = simplified(SLIVER_MM)?.map(checked_half);
     // Far from the origin f32 is coarser than SLIVER_MM (its spacing is
     // 1.5e-5 mm at 150 mm): a sliver that still flips in f32 is collapsed
     // again at a few f32 spacings of the half's extent (found-ede40982, a
@@ -97,8 +97,7 @@ fn sliver_free(
         .fold(0.0f64, |m, p| m.max(p.abs().max_element()));
     let f32_spacing = extent as f32 - (extent as f32).next_down();
     let eps = (4.0 * f32_spacing as f64).max(2.0 * SLIVER_MM);
-    let again = checked(format!("{what}, slivers collapsed"), half.simplify(eps))?;
-    let Some(traced) = join(to_mesh(&again)) else {
+    let Some(traced) = simplified(eps)? else {
         return Ok(None);
     };
     let done = checked_half(traced.clone());
