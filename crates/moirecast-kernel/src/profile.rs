@@ -72,7 +72,7 @@ impl Profile {
             }
             Profile::Ramp { angle, length } => 0.5 + (x * angle.cos() + y * angle.sin()) / length,
             Profile::Bump { sigma } => (-(x * x + y * y) / (2.0 * sigma * sigma)).exp(),
-            Profile::Sampled(s) => s.eval(x, y).0,
+            Profile::Sampled(s) => s.value(x, y),
         }
     }
 
@@ -130,6 +130,19 @@ pub struct SampledProfile {
     nx: usize,
     ny: usize,
     values: Vec<f64>,
+}
+
+/// Where (x, y) falls in a [`SampledProfile`]'s grid: the stencil's
+/// corner (i − 1, j − 1), whether it lies wholly inside the grid, and the
+/// Catmull-Rom weights and their derivatives along x and y.
+struct Stencil {
+    i: usize,
+    j: usize,
+    interior: bool,
+    wx: [f64; 4],
+    dx: [f64; 4],
+    wy: [f64; 4],
+    dy: [f64; 4],
 }
 
 fn catmull_rom(t: f64) -> ([f64; 4], [f64; 4]) {
@@ -312,6 +325,40 @@ impl SampledProfile {
 
     /// (e, ∇e) at (x, y) by Catmull-Rom interpolation (C¹).
     pub fn eval(&self, x: f64, y: f64) -> (f64, DVec2) {
+        let s = self.stencil(x, y);
+        let (mut e, mut ex, mut ey) = (0.0, 0.0, 0.0);
+        for b in 0..4 {
+            let row = self.stencil_row(&s, b);
+            let (mut r, mut rd) = (0.0, 0.0);
+            for ((w, d), v) in s.wx.iter().zip(s.dx).zip(row) {
+                r += w * v;
+                rd += d * v;
+            }
+            e += s.wy[b] * r;
+            ex += s.wy[b] * rd;
+            ey += s.dy[b] * r;
+        }
+        (e, DVec2::new(ex, ey) / self.spacing)
+    }
+
+    /// e at (x, y), as [`SampledProfile::eval`] gives it, without the
+    /// gradient (a frame's elevation phase per pixel).
+    pub fn value(&self, x: f64, y: f64) -> f64 {
+        let s = self.stencil(x, y);
+        let mut e = 0.0;
+        for b in 0..4 {
+            let row = self.stencil_row(&s, b);
+            let mut r = 0.0;
+            for (w, v) in s.wx.iter().zip(row) {
+                r += w * v;
+            }
+            e += s.wy[b] * r;
+        }
+        e
+    }
+
+    /// The 4 × 4 Catmull-Rom stencil around (x, y).
+    fn stencil(&self, x: f64, y: f64) -> Stencil {
         let fx = ((x - self.origin.x) / self.spacing).clamp(0.0, (self.nx - 1) as f64);
         let fy = ((y - self.origin.y) / self.spacing).clamp(0.0, (self.ny - 1) as f64);
         // fx, fy ≥ 0, so truncation is floor (and avoids a libm call)
@@ -322,34 +369,27 @@ impl SampledProfile {
         let (wx, dx) = catmull_rom(fx - i);
         let (wy, dy) = catmull_rom(fy - j);
         let (i, j) = (i as usize, j as usize);
-        let (mut e, mut ex, mut ey) = (0.0, 0.0, 0.0);
-        if i >= 1 && j >= 1 && i + 2 < self.nx && j + 2 < self.ny {
-            // interior: the 4 × 4 stencil needs no clamping
-            for b in 0..4 {
-                let row = &self.values[(j - 1 + b) * self.nx + i - 1..][..4];
-                let (mut r, mut rd) = (0.0, 0.0);
-                for a in 0..4 {
-                    r += wx[a] * row[a];
-                    rd += dx[a] * row[a];
-                }
-                e += wy[b] * r;
-                ex += wy[b] * rd;
-                ey += dy[b] * r;
-            }
-        } else {
-            for b in 0..4 {
-                let (mut r, mut rd) = (0.0, 0.0);
-                for a in 0..4 {
-                    let v = self.at(i as isize - 1 + a as isize, j as isize - 1 + b as isize);
-                    r += wx[a] * v;
-                    rd += dx[a] * v;
-                }
-                e += wy[b] * r;
-                ex += wy[b] * rd;
-                ey += dy[b] * r;
-            }
+        Stencil {
+            i,
+            j,
+            interior: i >= 1 && j >= 1 && i + 2 < self.nx && j + 2 < self.ny,
+            wx,
+            dx,
+            wy,
+            dy,
         }
-        (e, DVec2::new(ex, ey) / self.spacing)
+    }
+
+    /// Row `b` of the stencil's values: in the interior a slice of the
+    /// grid, at the border clamped to it.
+    fn stencil_row(&self, s: &Stencil, b: usize) -> [f64; 4] {
+        if s.interior {
+            let start = (s.j - 1 + b) * self.nx + s.i - 1;
+            return self.values[start..start + 4].try_into().unwrap();
+        }
+        std::array::from_fn(|a| {
+            self.at(s.i as isize - 1 + a as isize, s.j as isize - 1 + b as isize)
+        })
     }
 
     fn max_slope_x(&self, half_w: f64, half_h: f64) -> (f64, DVec2) {

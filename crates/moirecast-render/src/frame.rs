@@ -433,6 +433,74 @@ const MIDPOINT_RESIDUAL: f64 = 0.02;
 /// A lattice cell's colour and dropped weight.
 type Cell = (DVec3, f64);
 
+/// Of a window's lens phases, every this many (and the last) is traced
+/// first; see [`phase_mean`].
+const PHASE_STRIDE: usize = 4;
+/// A stretch of phases between two traced ones is interpolated where the
+/// phase traced midway lies within this (any channel) of the line through
+/// them: the same rule as [`MIDPOINT_RESIDUAL`] along the rows. On the
+/// reference at 256 px it traces 27 % fewer rays, and the frame moves
+/// from one tracing every phase by RMS 0.0003 (8-bit sRGB / 255).
+const PHASE_RESIDUAL: f64 = 0.02;
+
+/// The mean of `sample(m)` over the `n` phases m of a lens-period window,
+/// in their order across it, with the samples between traced ones
+/// interpolated where they lie on a line.
+///
+/// Across a lens a frame's colour is piecewise linear in the phase: a ramp
+/// as the exit direction sweeps between the two lights, flat where one
+/// light fills it, with a jump where a ray crosses a crease. So every
+/// [`PHASE_STRIDE`]-th phase and the last are traced, and each stretch
+/// between two traced phases is halved: its middle traced, the rest of
+/// it interpolated if the middle lies within [`PHASE_RESIDUAL`] of the
+/// line through its ends, or else each half again. A jump is traced down
+/// to single phases; a line costs its ends and its middle.
+fn phase_mean(n: usize, sample: &dyn Fn(usize) -> Cell) -> Cell {
+    let mut got: Vec<Cell> = vec![(DVec3::ZERO, 0.0); n];
+    if n == 0 {
+        return (DVec3::ZERO, 0.0);
+    }
+    let lerp = |(ca, da): Cell, (cb, db): Cell, w: f64| (ca.lerp(cb, w), da + w * (db - da));
+    // the stretch (a, b), its ends traced
+    fn halve(
+        (a, b): (usize, usize),
+        got: &mut [Cell],
+        sample: &dyn Fn(usize) -> Cell,
+        lerp: &dyn Fn(Cell, Cell, f64) -> Cell,
+    ) {
+        if b - a <= 1 {
+            return;
+        }
+        let m = (a + b) / 2;
+        got[m] = sample(m);
+        let on_line = lerp(got[a], got[b], (m - a) as f64 / (b - a) as f64);
+        if (got[m].0 - on_line.0).abs().max_element() > PHASE_RESIDUAL {
+            halve((a, m), got, sample, lerp);
+            halve((m, b), got, sample, lerp);
+            return;
+        }
+        for (p, q) in [(a, m), (m, b)] {
+            for j in p + 1..q {
+                got[j] = lerp(got[p], got[q], (j - p) as f64 / (q - p) as f64);
+            }
+        }
+    }
+    let mut ends: Vec<usize> = (0..n).step_by(PHASE_STRIDE).collect();
+    if ends.last() != Some(&(n - 1)) {
+        ends.push(n - 1);
+    }
+    for &j in &ends {
+        got[j] = sample(j);
+    }
+    for w in ends.windows(2) {
+        halve((w[0], w[1]), &mut got, sample, &lerp);
+    }
+    let (colour, dropped) = got
+        .iter()
+        .fold((DVec3::ZERO, 0.0), |(c, d), &(gc, gd)| (c + gc, d + gd));
+    (colour / n as f64, dropped / n as f64)
+}
+
 /// The pixels a [`Sections`] lattice colours: per pixel its colour, phase
 /// and dropped weight, or `None` where the mesh must be traced (pixels that
 /// see no layout point, or whose section could not be built).
@@ -482,22 +550,20 @@ fn lattice_pixels(
     let trace_cell = |r: usize, i: i64| {
         let section = sections.section(r)?;
         let v = sections.station(r);
-        let (mut colour, mut dropped) = (DVec3::ZERO, 0.0);
-        for j in 0..phases {
-            let u = design.crease_u(i) + (j as f64 + 0.5) / phases as f64 * t;
-            let point = design.surface().point(u, v);
-            if !point.is_finite() {
-                return None; // beyond a sphere's rim
-            }
-            let ray = shot.ray_through(point);
-            let (c, d) = trace(ray, section);
-            (colour, dropped) = (colour + c, dropped + d);
-        }
-        Some((colour / phases as f64, dropped / phases as f64))
+        let points = (0..phases)
+            .map(|j| {
+                let u = design.crease_u(i) + (j as f64 + 0.5) / phases as f64 * t;
+                let point = design.surface().point(u, v);
+                point.is_finite().then_some(point) // not beyond a sphere's rim
+            })
+            .collect::<Option<Vec<DVec3>>>()?;
+        Some(phase_mean(phases, &|j| {
+            trace(shot.ray_through(points[j]), section)
+        }))
     };
     let cells = traced_or_interpolated(&needed, columns, &|r, c| trace_cell(r, c as i64 - 1));
     let levels = design.params.base.levels;
-    seen.into_iter()
+    seen.into_par_iter()
         .map(|s| {
             let Seen { r, wr, i, w, u, v } = s?;
             // bilinear in (lens, station)
@@ -545,6 +611,18 @@ fn traced_or_interpolated(
         .collect();
     let at_column = |r: usize, c: usize| r * columns + c;
     let mut cells: Vec<Option<Cell>> = vec![None; needed.len()];
+    type At = (f64, Option<Cell>);
+    /// What else tells whether a cell between two traced ones lies on
+    /// the line through them.
+    #[derive(Clone, Copy)]
+    enum Check {
+        /// The cell traced midway between them (for a quarter).
+        Middle(At),
+        /// The traced cells a stride before and after them (for a
+        /// middle): they too lie on the line, so the stretch is straight.
+        Beyond(At, At),
+        None,
+    }
     // the k-th of n: traced first (0), a middle (1) or a quarter (2)
     let class = |k: usize, n: usize| match k % ROW_STRIDE {
         _ if k + 1 == n => 0,
@@ -553,9 +631,9 @@ fn traced_or_interpolated(
         _ => 2,
     };
     // the interpolated value at p, if a (at pa) and b (at pb) allow it:
-    // they agree, or the middle m (at pm) lies on the line through them
-    type At = (f64, Option<Cell>);
-    let predict = |(pa, a): At, (pb, b): At, middle: Option<At>, p: f64| -> Option<Cell> {
+    // they agree, or the check says the cells around lie on the line
+    // through them
+    let predict = |(pa, a): At, (pb, b): At, check: Check, p: f64| -> Option<Cell> {
         let (a, b) = (a?, b?);
         let lerp = |(pa, (ca, da)): (f64, Cell), (pb, (cb, db)): (f64, Cell)| {
             let w = (p - pa) / (pb - pa);
@@ -564,16 +642,24 @@ fn traced_or_interpolated(
         if (a.0 - b.0).abs().max_element() <= ROW_AGREEMENT {
             return Some(lerp((pa, a), (pb, b)));
         }
-        let (pm, m) = middle?;
-        let m = m?;
-        let on_line = a.0.lerp(b.0, (pm - pa) / (pb - pa));
-        ((m.0 - on_line).abs().max_element() <= MIDPOINT_RESIDUAL).then(|| {
-            if p < pm {
-                lerp((pa, a), (pm, m))
-            } else {
-                lerp((pm, m), (pb, b))
+        let on_line = |(pm, m): At| -> Option<bool> {
+            let on_line = a.0.lerp(b.0, (pm - pa) / (pb - pa));
+            Some((m?.0 - on_line).abs().max_element() <= MIDPOINT_RESIDUAL)
+        };
+        match check {
+            Check::Middle(middle) => on_line(middle)?.then(|| {
+                let (pm, m) = (middle.0, middle.1.unwrap());
+                if p < pm {
+                    lerp((pa, a), (pm, m))
+                } else {
+                    lerp((pm, m), (pb, b))
+                }
+            }),
+            Check::Beyond(before, after) => {
+                (on_line(before)? && on_line(after)?).then(|| lerp((pa, a), (pb, b)))
             }
-        })
+            Check::None => None,
+        }
     };
     // the rows traced first, lens class by lens class
     for lens_class in 0..3 {
@@ -591,9 +677,15 @@ fn traced_or_interpolated(
                             (c as f64, cells[at_column(r, c)])
                         });
                         let (cb, cm) = ((ca + ROW_STRIDE).min(columns - 1), ca + ROW_STRIDE / 2);
-                        let middle = (lens_class == 2 && cm < cb).then(|| at(cm));
+                        let check = match lens_class {
+                            2 if cm < cb => Check::Middle(at(cm)),
+                            1 if ca >= ROW_STRIDE && cb + ROW_STRIDE < columns => {
+                                Check::Beyond(at(ca - ROW_STRIDE), at(cb + ROW_STRIDE))
+                            }
+                            _ => Check::None,
+                        };
                         let value = (lens_class > 0)
-                            .then(|| predict(at(ca), at(cb), middle, c as f64))
+                            .then(|| predict(at(ca), at(cb), check, c as f64))
                             .flatten();
                         let value = value.or_else(|| trace(r, c));
                         (at_column(r, c), value)
@@ -618,8 +710,14 @@ fn traced_or_interpolated(
                     .map(move |(k, &r)| {
                         let ka = k - k % ROW_STRIDE;
                         let (kb, km) = ((ka + ROW_STRIDE).min(n - 1), ka + ROW_STRIDE / 2);
-                        let middle = (row_class == 2 && km < kb).then(|| at(km));
-                        let value = predict(at(ka), at(kb), middle, r as f64);
+                        let check = match row_class {
+                            2 if km < kb => Check::Middle(at(km)),
+                            1 if ka >= ROW_STRIDE && kb + ROW_STRIDE < n => {
+                                Check::Beyond(at(ka - ROW_STRIDE), at(kb + ROW_STRIDE))
+                            }
+                            _ => Check::None,
+                        };
+                        let value = predict(at(ka), at(kb), check, r as f64);
                         let value = value.or_else(|| trace(r, c));
                         (at_column(r, c), value)
                     })
@@ -702,27 +800,20 @@ pub fn render_traced(
         let samples = (n * n) as f64;
         (sum / samples, phase, dropped / samples)
     };
-    // the layout point the pixel's centre sees, and rays through the pitch
-    // surface at fixed lens phases across the period centred on it
-    // the sections the view lets the branching integrator trace, if any
-    let traced_sections = match (view.integrator, view.sampling, sections) {
-        (Integrator::Branching(pruning), Sampling::LensPeriod(_), Some(sections))
-            if view.camera == Camera::Orthographic && view.tilt_along == 0.0 =>
-        {
-            Some((sections, pruning))
-        }
-        _ => None,
-    };
+    let traced_sections = sections.and_then(|s| traced(s, &view));
     // Without a mesh, the pixels the lattice leaves (the outermost lenses')
     // trace their own lens-period windows through the sections around
     // their station, bilinearly as the lattice's cells are: `None` where
     // the sections do not reach. (With a mesh, through the mesh: the
     // dome's frame agrees with the mesh tracer's 0.9810 so, 0.9798 through
     // the sections.)
-    let through_sections = |(origin, d): (DVec3, DVec3), v: f64| -> Option<(DVec3, f64)> {
+    let sections_at = |v: f64| {
         let (sections, pruning) = traced_sections.filter(|_| scene.is_empty())?;
         let (r, wr) = sections.row_below(v)?;
-        let (a, b) = (sections.section(r)?, sections.section(r + 1)?);
+        Some((sections.section(r)?, sections.section(r + 1)?, wr, pruning))
+    };
+    let through_sections = |(origin, d): (DVec3, DVec3), v: f64| -> Option<(DVec3, f64)> {
+        let (a, b, wr, pruning) = sections_at(v)?;
         let a = trace_branches(a, index, origin, d, &colour_of, pruning);
         let b = trace_branches(b, index, origin, d, &colour_of, pruning);
         Some((
@@ -736,21 +827,27 @@ pub fn render_traced(
         let (t, hw) = (design.params.period, design.params.width / 2.0);
         let (u, v) = layout_on_ray(design, origin, d, (target.x, target.y))
             .filter(|(u, v)| u.abs() <= hw + t && v.abs() <= design.half_height + t)?;
-        // the window in lens units: lens i spans [i, i + 1) from crease 0
-        let start = (u + hw) / t - 0.5;
-        let (mut sum, mut dropped) = (DVec3::ZERO, 0.0);
-        for j in 0..k {
-            let mut s = start.floor() + (j as f64 + 0.5) / k as f64;
-            if s < start {
-                s += 1.0;
-            }
-            let ray = shot.ray_through(design.surface().point(s * t - hw, v));
-            let (colour, dr) = through_sections(ray, v).unwrap_or_else(|| {
+        let phases = window_phases((u + hw) / t - 0.5, k);
+        let ray_at = |m: usize| shot.ray_through(design.surface().point(phases[m] * t - hw, v));
+        let sample = |m: usize, rng: &mut SplitMix64| {
+            let ray = ray_at(m);
+            through_sections(ray, v).unwrap_or_else(|| {
                 let (colour, _, dr) = trace(ray, rng);
                 (colour, dr)
-            });
-            (sum, dropped) = (sum + colour, dropped + dr);
-        }
+            })
+        };
+        // through the sections, phases are interpolated as the lattice's
+        // are; through the mesh each is traced (the mesh tracer is the
+        // reference the sections are held to)
+        let (sum, dropped) = if sections_at(v).is_some() {
+            let (c, d) = phase_mean(k, &|m| sample(m, &mut SplitMix64(0)));
+            (c * k as f64, d * k as f64)
+        } else {
+            (0..k).fold((DVec3::ZERO, 0.0), |(c, d), m| {
+                let (sc, sd) = sample(m, rng);
+                (c + sc, d + sd)
+            })
+        };
         let on_top = u.abs() <= hw && v.abs() <= design.half_height;
         let phase = if on_top { phase_at(u, v) } else { f64::NAN };
         Some((sum / k as f64, phase, dropped / k as f64))
@@ -790,6 +887,38 @@ pub fn render_traced(
         period_px: design.params.period / shot.pixel,
         dropped_weight: dropped.iter().sum::<f64>() / dropped.len().max(1) as f64,
     }
+}
+
+/// The sections a view lets the branching integrator trace, and its
+/// pruning: an orthographic camera tilted about the lens axis alone, with
+/// lens-phase sampling.
+fn traced<'s, 'd>(sections: &'s Sections<'d>, view: &View) -> Option<(&'s Sections<'d>, Pruning)> {
+    match (view.integrator, view.sampling) {
+        (Integrator::Branching(pruning), Sampling::LensPeriod(_))
+            if view.camera == Camera::Orthographic && view.tilt_along == 0.0 =>
+        {
+            Some((sections, pruning))
+        }
+        _ => None,
+    }
+}
+
+/// The `k` fixed lens phases (j + ½)/k of the window [start, start + 1)
+/// in lens units (lens i spans [i, i + 1) from crease 0), in order across
+/// it.
+fn window_phases(start: f64, k: usize) -> Vec<f64> {
+    let mut phases: Vec<f64> = (0..k)
+        .map(|j| {
+            let s = start.floor() + (j as f64 + 0.5) / k as f64;
+            if s < start {
+                s + 1.0
+            } else {
+                s
+            }
+        })
+        .collect();
+    phases.sort_by(f64::total_cmp);
+    phases
 }
 
 /// Every pixel of a `width` × `height` frame, by `pixel_of(x, y)`: its

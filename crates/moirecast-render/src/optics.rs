@@ -12,28 +12,60 @@ pub fn reflect(d: DVec3, normal: DVec3) -> DVec3 {
 /// The refracted direction going from index `n1` into `n2`, or `None` at
 /// total internal reflection.
 pub fn refract(d: DVec3, normal: DVec3, n1: f64, n2: f64) -> Option<DVec3> {
-    let eta = n1 / n2;
-    let cos_i = -d.dot(normal);
-    let sin2_t = eta * eta * (1.0 - cos_i * cos_i).max(0.0);
-    if sin2_t > 1.0 {
-        return None;
-    }
-    let cos_t = (1.0 - sin2_t).sqrt();
-    Some((eta * d + (eta * cos_i - cos_t) * normal).normalize())
+    split(d, normal, n1, n2).refracted
 }
 
 /// Unpolarised Fresnel reflectance (the mean of s and p) for a ray meeting
 /// the interface from index `n1` into `n2` at `cos_i` (> 0); 1 at total
 /// internal reflection.
 pub fn fresnel(cos_i: f64, n1: f64, n2: f64) -> f64 {
-    let sin2_t = (n1 / n2).powi(2) * (1.0 - cos_i * cos_i).max(0.0);
+    let sin2_t = snell(cos_i, n1 / n2);
     if sin2_t >= 1.0 {
         return 1.0;
     }
-    let cos_t = (1.0 - sin2_t).sqrt();
+    reflectance(cos_i, (1.0 - sin2_t).sqrt(), n1, n2)
+}
+
+/// sin² of the refracted angle, by Snell's law, for a ray meeting the
+/// interface at `cos_i` with index ratio `eta` = n1 / n2 (over 1: total
+/// internal reflection).
+fn snell(cos_i: f64, eta: f64) -> f64 {
+    eta * eta * (1.0 - cos_i * cos_i).max(0.0)
+}
+
+/// The mean of the s and p reflectances at `cos_i` in, `cos_t` out.
+fn reflectance(cos_i: f64, cos_t: f64, n1: f64, n2: f64) -> f64 {
     let rs = (n1 * cos_i - n2 * cos_t) / (n1 * cos_i + n2 * cos_t);
     let rp = (n1 * cos_t - n2 * cos_i) / (n1 * cos_t + n2 * cos_i);
     0.5 * (rs * rs + rp * rp)
+}
+
+/// What a ray meets at an interface: its reflection, its refraction and
+/// the Fresnel reflectance, each as [`reflect`], [`refract`] and
+/// [`fresnel`] give it, with Snell's law solved once for the three.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Split {
+    pub reflected: DVec3,
+    pub refracted: Option<DVec3>,
+    pub reflectance: f64,
+}
+
+/// The ray `d` meeting a surface of `normal` (facing it) from index `n1`
+/// into `n2`.
+pub fn split(d: DVec3, normal: DVec3, n1: f64, n2: f64) -> Split {
+    let eta = n1 / n2;
+    let cos_i = -d.dot(normal);
+    let sin2_t = snell(cos_i, eta);
+    let cos_t = (1.0 - sin2_t).sqrt();
+    Split {
+        reflected: reflect(d, normal),
+        refracted: (sin2_t <= 1.0).then(|| (eta * d + (eta * cos_i - cos_t) * normal).normalize()),
+        reflectance: if sin2_t >= 1.0 {
+            1.0
+        } else {
+            reflectance(cos_i, cos_t, n1, n2)
+        },
+    }
 }
 
 #[cfg(test)]

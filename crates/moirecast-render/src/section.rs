@@ -89,56 +89,99 @@ impl Arc2 {
     /// The nearest t > `t_min` at which `o + t·d` meets the arc from
     /// `side` (entering from outside, leaving from inside), and the
     /// outward normal there.
+    ///
+    /// The body a lens bounds lies inside its circle near the arc (every
+    /// lens bulges away from its body), so a ray entering from outside
+    /// meets the arc at the circle's nearer root and one leaving from
+    /// inside at its farther root: only that root is solved.
     fn meet(&self, o: DVec2, d: DVec2, t_min: f64, side: Side) -> Option<(f64, DVec2)> {
         let oc = o - self.centre;
-        let (a, b, c) = (d.dot(d), oc.dot(d), oc.dot(oc) - self.radius * self.radius);
+        let b = oc.dot(d);
+        // entering, the ray meets the circle before its nearest approach
+        // to the centre, which is behind it: every ray leaving a lens
+        if side == Side::Outside && b > 0.0 {
+            return None;
+        }
+        let (a, c) = (d.dot(d), oc.dot(oc) - self.radius * self.radius);
         let disc = b * b - a * c;
         if disc < 0.0 || a == 0.0 {
             return None;
         }
         let root = disc.sqrt();
-        // the two roots, nearer first, without cancellation
-        let q = -(b + b.signum() * root);
-        let (t0, t1) = if q == 0.0 {
-            (0.0, 0.0)
+        // the root wanted, without cancellation: q/a is the nearer root
+        // where q < 0 and the farther where q > 0, c/q the other
+        let q = if b.is_sign_negative() {
+            root - b
         } else {
-            let (x, y) = (q / a, c / q);
-            (x.min(y), x.max(y))
+            -(b + root)
         };
-        [t0, t1].into_iter().find_map(|t| {
-            if t <= t_min {
-                return None;
-            }
-            let radial = oc + t * d;
-            let normal = radial / self.radius;
-            let facing = match side {
-                Side::Outside => d.dot(normal) < 0.0,
-                Side::Inside => d.dot(normal) > 0.0,
-            };
-            (facing && radial.dot(self.middle) >= self.on_arc).then_some((t, normal))
-        })
+        let t = if q == 0.0 {
+            0.0
+        } else if (side == Side::Outside) == (q < 0.0) {
+            q / a
+        } else {
+            c / q
+        };
+        if t <= t_min {
+            return None;
+        }
+        let radial = oc + t * d;
+        let facing = match side {
+            Side::Outside => d.dot(radial) < 0.0,
+            Side::Inside => d.dot(radial) > 0.0,
+        };
+        (facing && radial.dot(self.middle) >= self.on_arc).then(|| (t, radial / self.radius))
     }
 }
+
+/// How far (mm) beyond a wall's z extent a ray's line, found without
+/// dividing, must pass for the wall to be skipped: far more than that
+/// line's rounding, so the skip never drops a meeting.
+const WALL_SLACK: f64 = 1e-6;
 
 /// Base creases a section adds beyond the layout's edge, at most, to reach
 /// a wall (a base that ends this many periods inside its wall would fold).
 const MAX_EXTRA_CREASES: usize = 64;
 
-/// Arcs per block of an [`ArcRow`].
-const BLOCK: usize = 8;
+/// A ray in a section's plane, and its slope dz/dx (shared by the rows
+/// it is tested against).
+#[derive(Clone, Copy, Debug)]
+struct Ray2 {
+    o: DVec2,
+    d: DVec2,
+    slope: f64,
+}
 
-/// An x and a z extent.
-type Extent = ((f64, f64), (f64, f64));
+impl Ray2 {
+    fn new(o: DVec2, d: DVec2) -> Ray2 {
+        Ray2 {
+            o,
+            d,
+            slope: d.y / d.x,
+        }
+    }
 
-/// Arcs ordered along x (their x extents increase), as the lenses of a row,
-/// in blocks of [`BLOCK`] with the x and z extent of each: a ray skips the
-/// blocks it passes above or below.
-#[derive(Clone, Debug, Default)]
-struct ArcRow {
-    arcs: Vec<Arc2>,
-    blocks: Vec<Extent>,
-    /// The row's z extent: a ray outside it meets nothing.
-    z: (f64, f64),
+    /// The z of the ray's line at x.
+    fn z_at(&self, x: f64) -> f64 {
+        self.o.y + (x - self.o.x) * self.slope
+    }
+
+    /// The z extent of the ray's line over an x extent.
+    fn z_over(&self, x: (f64, f64)) -> (f64, f64) {
+        let (a, b) = (self.z_at(x.0), self.z_at(x.1));
+        if a < b {
+            (a, b)
+        } else {
+            (b, a)
+        }
+    }
+
+    /// Whether the ray is too close to vertical for its z over an x extent
+    /// to be told from its slope: an x one rounding off would move the z
+    /// by more than about 1e-9 mm.
+    fn steep(&self) -> bool {
+        self.d.x.abs() < 1e-6 * self.d.y.abs() || !self.slope.is_finite()
+    }
 }
 
 /// The union of two extents.
@@ -148,126 +191,159 @@ fn union(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
 
 const EMPTY: (f64, f64) = (f64::INFINITY, f64::NEG_INFINITY);
 
+/// Whether two extents do not overlap.
+fn apart(a: (f64, f64), b: (f64, f64)) -> bool {
+    a.1 < b.0 || a.0 > b.1
+}
+
+/// Arcs ordered along x (their x extents increase), as the lenses of a
+/// row, with the z extent of the arcs on either side of each: a ray walks
+/// the arcs from where it starts in the direction it travels, and stops
+/// where it has passed above or below every arc left. No division but
+/// where a ray starts outside the row's z extent.
+#[derive(Clone, Debug, Default)]
+struct ArcRow {
+    arcs: Vec<Arc2>,
+    /// `after[k]`: the z extent of arcs k.. (EMPTY past the last);
+    /// `before[k]`: of arcs ..k (EMPTY at 0).
+    after: Vec<(f64, f64)>,
+    before: Vec<(f64, f64)>,
+    /// The row's z extent: a ray outside it meets nothing.
+    z: (f64, f64),
+    /// The first arc's x and arcs per mm across the row: where to start
+    /// looking for the arc at an x (the arcs are about equally wide).
+    x_first: f64,
+    arcs_per_mm: f64,
+}
+
 impl ArcRow {
     fn new(arcs: Vec<Arc2>) -> ArcRow {
-        let blocks: Vec<Extent> = arcs
-            .chunks(BLOCK)
-            .map(|c| {
-                c.iter()
-                    .fold((EMPTY, EMPTY), |(x, z), a| (union(x, a.x), union(z, a.z)))
-            })
-            .collect();
-        let z = blocks.iter().fold(EMPTY, |z, b| union(z, b.1));
-        ArcRow { arcs, blocks, z }
+        let n = arcs.len();
+        let mut after = vec![EMPTY; n + 1];
+        let mut before = vec![EMPTY; n + 1];
+        for k in (0..n).rev() {
+            after[k] = union(after[k + 1], arcs[k].z);
+        }
+        for k in 0..n {
+            before[k + 1] = union(before[k], arcs[k].z);
+        }
+        let (x_first, arcs_per_mm) = match (arcs.first(), arcs.last()) {
+            (Some(a), Some(b)) if b.x.1 > a.x.0 => (a.x.0, n as f64 / (b.x.1 - a.x.0)),
+            _ => (0.0, 0.0),
+        };
+        ArcRow {
+            z: after[0],
+            arcs,
+            after,
+            before,
+            x_first,
+            arcs_per_mm,
+        }
     }
 
-    /// The nearest meeting in (`t_min`, `t_max`] within `walls` (x), among
-    /// the arcs the ray passes inside the row's z extent: walked from the
-    /// ray's start in the direction it travels, stopping past the nearest
-    /// meeting found. (A meeting beyond the walls is the caller's to drop.)
+    /// The nearest meeting in (`t_min`, `t_max`] within `walls` (x):
+    /// the arcs walked from where the ray is in the row's z extent, in the
+    /// direction it travels, up to the nearest meeting found, the walls,
+    /// or where the ray is above or below every arc left. (A meeting
+    /// beyond the walls is the caller's to drop.)
+    #[inline(always)]
     fn meet(
         &self,
-        (o, d): (DVec2, DVec2),
+        ray: Ray2,
         (t_min, t_max): (f64, f64),
         side: Side,
         walls: (f64, f64),
     ) -> Option<(f64, DVec2)> {
-        // the stretch of the ray inside the row's z extent, and its x range
-        let (t0, t1) = if d.y == 0.0 {
-            if o.y < self.z.0 || o.y > self.z.1 {
+        let (o, d) = (ray.o, ray.d);
+        // where the search starts: at t_min, or where the ray enters the
+        // row's z extent if it starts outside it, heading in
+        let z_min = o.y + t_min * d.y;
+        let t_start = if z_min > self.z.1 {
+            if d.y >= 0.0 {
                 return None;
             }
-            (f64::NEG_INFINITY, f64::INFINITY)
-        } else {
-            let (a, b) = ((self.z.0 - o.y) / d.y, (self.z.1 - o.y) / d.y);
-            (a.min(b), a.max(b))
-        };
-        let (t0, t1) = (t0.max(t_min), t1.min(t_max));
-        if t0 > t1 {
-            return None;
-        }
-        let x_at = |t: f64| {
-            if t.is_finite() {
-                o.x + t * d.x
-            } else if (d.x >= 0.0) == (t > 0.0) {
-                f64::INFINITY
-            } else {
-                f64::NEG_INFINITY
+            (self.z.1 - o.y) / d.y
+        } else if z_min < self.z.0 {
+            if d.y <= 0.0 {
+                return None;
             }
+            (self.z.0 - o.y) / d.y
+        } else {
+            t_min
         };
-        let (xa, xb) = (x_at(t0), x_at(t1));
-        let (x0, x1) = (xa.min(xb).max(walls.0), xa.max(xb).min(walls.1));
-        if x0 > x1 {
+        if t_start > t_max {
             return None;
         }
         let forward = d.x >= 0.0;
-        // the ray's z over an x extent must overlap the z extent
-        let slope = d.y / d.x;
-        let misses = |(x, z): Extent| {
-            if !slope.is_finite() {
-                return false;
-            }
-            let (za, zb) = (o.y + (x.0 - o.x) * slope, o.y + (x.1 - o.x) * slope);
-            za.max(zb) < z.0 || za.min(zb) > z.1
+        // beyond `x_stop`, in the direction of travel, nothing is nearer:
+        // the far wall, t_max, and then the nearest meeting found
+        // (plain comparisons: no NaN reaches here, and f64::min is slower)
+        let nearer = |x: f64, y: f64| if (x < y) == forward { x } else { y };
+        let mut x_stop = if forward { walls.1 } else { walls.0 };
+        if t_max.is_finite() {
+            x_stop = nearer(x_stop, o.x + t_max * d.x);
+        }
+        let x_start = o.x + t_start * d.x;
+        let x_start = match forward {
+            true if x_start < walls.0 => walls.0,
+            false if x_start > walls.1 => walls.1,
+            _ => x_start,
         };
-        // an extent wholly beyond [x0, x1] or the nearest meeting so far,
-        // in the direction of travel: nothing after it is nearer
-        let past = |x: (f64, f64), best: &Option<(f64, DVec2)>| {
-            let far = best.map_or(if forward { x1 } else { x0 }, |(t, _)| o.x + t * d.x);
-            if forward {
-                x.0 > far.min(x1)
-            } else {
-                x.1 < far.max(x0)
-            }
-        };
+        if (forward && x_start > x_stop) || (!forward && x_start < x_stop) {
+            return None;
+        }
+        let (steep, arcs) = (ray.steep(), &self.arcs);
         let mut best: Option<(f64, DVec2)> = None;
-        let arcs = &self.arcs;
-        // arcs in the order the ray passes them, from the first it can
-        // meet; a block the ray passes above or below is skipped whole
-        let n = arcs.len();
-        let (mut j, stop) = if forward {
-            (self.first_reaching(x0), n)
+        // forward, k is the next arc; backward, one past it
+        let mut k = if forward {
+            self.first_reaching(x_start)
         } else {
-            (n - self.first_beyond(x1), n)
+            self.first_beyond(x_start)
         };
-        // j counts arcs passed; the arc is `at(j)`
-        let at = |j: usize| if forward { j } else { n - 1 - j };
-        while j < stop {
-            let i = at(j);
-            let entering_block = if forward {
-                i % BLOCK == 0
-            } else {
-                i % BLOCK == BLOCK - 1 || i == n - 1
+        loop {
+            let arc = match (forward, k) {
+                (true, k) if k < arcs.len() => &arcs[k],
+                (false, k) if k > 0 => &arcs[k - 1],
+                _ => break,
             };
-            if entering_block && misses(self.blocks[i / BLOCK]) {
-                // to the first arc of the next block in the direction of travel
-                j += if forward { BLOCK } else { i % BLOCK + 1 };
-                continue;
-            }
-            let arc = &arcs[i];
-            if past(arc.x, &best) {
+            if (forward && arc.x.0 > x_stop) || (!forward && arc.x.1 < x_stop) {
                 break;
             }
-            if !misses((arc.x, arc.z)) {
+            if steep || !apart(ray.z_over(arc.x), arc.z) {
                 if let Some(hit) = arc.meet(o, d, t_min, side) {
-                    if best.is_none_or(|b| hit.0 < b.0) {
+                    if hit.0 <= t_max && best.is_none_or(|b| hit.0 < b.0) {
                         best = Some(hit);
+                        x_stop = nearer(x_stop, o.x + hit.0 * d.x);
                     }
                 }
             }
-            j += 1;
+            // past this arc, the ray is above or below every arc left
+            if !steep {
+                let (z_end, left) = if forward {
+                    (ray.z_at(arc.x.1), self.after[k + 1])
+                } else {
+                    (ray.z_at(arc.x.0), self.before[k - 1])
+                };
+                let rising = (ray.slope > 0.0) == forward;
+                if (rising && z_end > left.1) || (!rising && z_end < left.0) {
+                    break;
+                }
+            }
+            k = if forward { k + 1 } else { k - 1 };
         }
         best
     }
 
     /// The index of an arc near x: the arcs are about equally wide.
     fn guess(&self, x: f64) -> usize {
-        let (first, last) = match (self.arcs.first(), self.arcs.last()) {
-            (Some(a), Some(b)) if b.x.1 > a.x.0 => (a.x.0, b.x.1),
-            _ => return 0,
-        };
-        let n = self.arcs.len();
-        (((x - first) / (last - first) * n as f64).max(0.0) as usize).min(n - 1)
+        let (g, last) = ((x - self.x_first) * self.arcs_per_mm, self.arcs.len());
+        if g > 0.0 && g < last as f64 {
+            g as usize
+        } else if g > 0.0 {
+            last.saturating_sub(1)
+        } else {
+            0
+        }
     }
 
     /// The first arc whose x extent reaches x (ends at or past it), or n.
@@ -308,6 +384,65 @@ pub struct Section {
     /// Each wall's z extent, from the base to the revealer's crease there:
     /// the wall itself, a vertical segment (the mesh's x-walls are planes).
     wall_z: [(f64, f64); 2],
+    body: Body,
+}
+
+/// Between the walls, a z that lies inside the device's body at each x
+/// (below every revealer arc there and above every base arc), in bins
+/// of equal width; NaN where the arcs' extents overlap in z.
+///
+/// Outside the body and between the walls, a ray is above the revealer
+/// or below the base. From above, it can meet the base only after the
+/// revealer (the base lies under the revealer at every x between the
+/// walls, and a line cannot leave that stretch of x and come back), and
+/// a wall never (it faces away): only the revealer is searched. From
+/// below, only the base. That halves the search of half the rays (every
+/// branch that leaves the device).
+#[derive(Clone, Debug)]
+struct Body {
+    x0: f64,
+    bins_per_mm: f64,
+    z: Vec<f64>,
+}
+
+impl Body {
+    /// Bins half a revealer lens wide between `walls`.
+    fn new(top: &ArcRow, base: &ArcRow, walls: (f64, f64)) -> Body {
+        let bins = 2 * top.arcs.len().max(1);
+        let width = (walls.1 - walls.0) / bins as f64;
+        let z = (0..bins)
+            .map(|b| {
+                let x = (walls.0 + b as f64 * width, walls.0 + (b + 1) as f64 * width);
+                let over = |row: &ArcRow| {
+                    row.arcs
+                        .iter()
+                        .filter(|a| !apart(a.x, x))
+                        .fold(EMPTY, |z, a| union(z, a.z))
+                };
+                let (top, base) = (over(top), over(base));
+                if top.0 > base.1 && top.0.is_finite() && base.1.is_finite() {
+                    0.5 * (top.0 + base.1)
+                } else {
+                    f64::NAN
+                }
+            })
+            .collect();
+        Body {
+            x0: walls.0,
+            bins_per_mm: 1.0 / width,
+            z,
+        }
+    }
+
+    /// The body's z at x, if x is strictly between the walls and known.
+    fn z_at(&self, x: f64) -> Option<f64> {
+        let b = (x - self.x0) * self.bins_per_mm;
+        if !(b > 0.0 && b < self.z.len() as f64) {
+            return None;
+        }
+        let z = self.z[b as usize];
+        (!z.is_nan()).then_some(z)
+    }
 }
 
 impl Section {
@@ -394,6 +529,7 @@ impl Section {
         Ok(Section {
             walls,
             wall_z: [wall_z(-hw), wall_z(hw)],
+            body: Body::new(&top, &base, walls),
             top,
             base,
         })
@@ -403,24 +539,49 @@ impl Section {
 impl Surfaces for Section {
     fn meet(&self, side: Side, origin: DVec3, dir: DVec3, t_min: f64) -> Option<Meeting> {
         let (o, d) = (in_plane(origin), DVec2::new(dir.x, dir.z));
-        // the walls: entered from outside, left from inside
-        let wall = [(self.walls.0, -1.0), (self.walls.1, 1.0)]
-            .into_iter()
-            .zip(self.wall_z)
-            .filter_map(|((x, outward), (z0, z1))| {
-                let t = (x - o.x) / d.x;
-                let z = o.y + t * d.y;
-                let facing = match side {
-                    Side::Outside => d.x * outward < 0.0,
-                    Side::Inside => d.x * outward > 0.0,
-                };
-                (t > t_min && facing && z >= z0 && z <= z1).then_some((t, DVec2::new(outward, 0.0)))
-            })
-            .min_by(|a, b| a.0.total_cmp(&b.0));
+        let ray = Ray2::new(o, d);
         let within = |hit: &(f64, DVec2)| {
             let x = o.x + hit.0 * d.x;
             x >= self.walls.0 && x <= self.walls.1
         };
+        let meeting = |(t, n): (f64, DVec2)| Meeting {
+            t,
+            normal: DVec3::new(n.x, 0.0, n.y),
+            absorbs: false,
+        };
+        // outside the body between the walls: one row to search
+        if side == Side::Outside {
+            if let Some(body) = self.body.z_at(o.x) {
+                let row = if o.y > body { &self.top } else { &self.base };
+                return row
+                    .meet(ray, (t_min, f64::INFINITY), side, self.walls)
+                    .filter(within)
+                    .map(meeting);
+            }
+        }
+        // the walls: entered from outside, left from inside; a ray moving
+        // towards +x enters through the −x wall and leaves through the +x
+        // one (a ray along z meets neither)
+        let towards_plus = d.x > 0.0;
+        let wall = (d.x != 0.0)
+            .then(|| {
+                let plus = towards_plus == (side == Side::Inside);
+                let (x, outward, (z0, z1)) = if plus {
+                    (self.walls.1, 1.0, self.wall_z[1])
+                } else {
+                    (self.walls.0, -1.0, self.wall_z[0])
+                };
+                // most rays pass far above or below a wall: said first
+                // without dividing
+                let z = ray.z_at(x);
+                if !ray.steep() && (z < z0 - WALL_SLACK || z > z1 + WALL_SLACK) {
+                    return None;
+                }
+                let t = (x - o.x) / d.x;
+                let z = o.y + t * d.y;
+                (t > t_min && z >= z0 && z <= z1).then_some((t, DVec2::new(outward, 0.0)))
+            })
+            .flatten();
         // The row the ray more likely meets first is searched first, and
         // the other only before that meeting: a ray going down inside
         // meets the base, any other the revealer (from above, or from
@@ -435,7 +596,7 @@ impl Surfaces for Section {
         for row in [first, second] {
             let t_max = nearest.map_or(f64::INFINITY, |(t, _)| t);
             if let Some(hit) = row
-                .meet((o, d), (t_min, t_max), side, self.walls)
+                .meet(ray, (t_min, t_max), side, self.walls)
                 .filter(within)
             {
                 if nearest.is_none_or(|n| hit.0 < n.0) {
@@ -443,11 +604,7 @@ impl Surfaces for Section {
                 }
             }
         }
-        nearest.map(|(t, n)| Meeting {
-            t,
-            normal: DVec3::new(n.x, 0.0, n.y),
-            absorbs: false,
-        })
+        nearest.map(meeting)
     }
 }
 

@@ -10,7 +10,7 @@
 //!   with the Fresnel probability (SplitMix64, seeded by the caller). A path
 //!   records where it ends, not a colour; the lighting is applied afterwards.
 
-use crate::optics::{fresnel, reflect, refract};
+use crate::optics::split;
 use crate::scene::{Scene, Side};
 use glam::DVec3;
 
@@ -100,10 +100,11 @@ impl Interface {
         } else {
             (normal, 1.0, index)
         };
+        let split = split(dir, normal, n1, n2);
         Interface {
-            reflected: reflect(dir, normal),
-            refracted: refract(dir, normal, n1, n2),
-            reflectance: fresnel(-dir.dot(normal), n1, n2),
+            reflected: split.reflected,
+            refracted: split.refracted,
+            reflectance: split.reflectance,
             through: if leaving { Side::Outside } else { Side::Inside },
         }
     }
@@ -209,7 +210,10 @@ pub fn trace_branches(
         dropped: 0.0,
     };
     // (origin, direction, side, weight, interfaces crossed)
-    let mut stack = vec![(origin, dir, Side::Outside, 1.0f64, 0usize)];
+    // (depth first: it never holds more than one branch per interface
+    // crossed, and one more)
+    let mut stack = Vec::with_capacity(pruning.max_depth.min(MAX_BOUNCES) + 2);
+    stack.push((origin, dir, Side::Outside, 1.0f64, 0usize));
     while let Some((origin, dir, side, weight, depth)) = stack.pop() {
         let Some(hit) = scene.meet(side, origin, dir, EPSILON_MM) else {
             out.colour += weight * colour_of(dir);
@@ -248,6 +252,7 @@ pub fn trace_branches(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::optics::{fresnel, refract};
     use moirecast_kernel::Mesh;
 
     /// An axis-aligned box from `lo` to `hi`, outward triangles.
