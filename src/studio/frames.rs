@@ -193,16 +193,33 @@ fn work(spec: &Spec, queue: mpsc::Receiver<FrameJob>) {
         };
         let reply = match frame {
             Err(e) => FrameReply::Failed(e),
-            Ok(frame) => match png(&to_rgb8(frame.width, frame.height, &frame.rgb)) {
-                Err(e) => FrameReply::Failed(format!("error: encoding the frame: {e:#}")),
-                Ok(bytes) => FrameReply::Done(FrameImage {
-                    png: bytes,
-                    fidelity: frame.fidelity(),
-                    local_fidelity: frame.local_fidelity(),
-                    contrast: frame.level_line_contrast(),
-                    milliseconds: started.elapsed().as_secs_f64() * 1e3,
-                }),
-            },
+            Ok(frame) => {
+                // the image and its three scores, side by side
+                let (encoded, (fidelity, (local_fidelity, contrast))) = rayon::join(
+                    || png(&to_rgb8(frame.width, frame.height, &frame.rgb)),
+                    || {
+                        rayon::join(
+                            || frame.fidelity(),
+                            || {
+                                rayon::join(
+                                    || frame.local_fidelity(),
+                                    || frame.level_line_contrast(),
+                                )
+                            },
+                        )
+                    },
+                );
+                match encoded {
+                    Err(e) => FrameReply::Failed(format!("error: encoding the frame: {e:#}")),
+                    Ok(bytes) => FrameReply::Done(FrameImage {
+                        png: bytes,
+                        fidelity,
+                        local_fidelity,
+                        contrast,
+                        milliseconds: started.elapsed().as_secs_f64() * 1e3,
+                    }),
+                }
+            }
         };
         let _ = job.reply.send(reply);
     }

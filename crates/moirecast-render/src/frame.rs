@@ -802,24 +802,22 @@ pub fn render_traced(
     };
     let traced_sections = sections.and_then(|s| traced(s, &view));
     // Without a mesh, the pixels the lattice leaves (the outermost lenses')
-    // trace their own lens-period windows through the sections around
-    // their station, bilinearly as the lattice's cells are: `None` where
-    // the sections do not reach. (With a mesh, through the mesh: the
-    // dome's frame agrees with the mesh tracer's 0.9810 so, 0.9798 through
-    // the sections.)
-    let sections_at = |v: f64| {
+    // trace their own lens-period windows through the section nearest
+    // their station: `None` where the sections do not reach. (With a mesh,
+    // through the mesh: the dome's frame agrees with the mesh tracer's
+    // 0.9810 so, 0.9798 through the sections. Both sections around the
+    // station, weighted as the lattice's cells are, cost a 256 px frame of
+    // the reference 3 % more at 0° and 12 % at 10°, and change no
+    // agreement with the path tracer by 1e-4.)
+    let section_at = |v: f64| {
         let (sections, pruning) = traced_sections.filter(|_| scene.is_empty())?;
         let (r, wr) = sections.row_below(v)?;
-        Some((sections.section(r)?, sections.section(r + 1)?, wr, pruning))
+        Some((sections.section(if wr < 0.5 { r } else { r + 1 })?, pruning))
     };
     let through_sections = |(origin, d): (DVec3, DVec3), v: f64| -> Option<(DVec3, f64)> {
-        let (a, b, wr, pruning) = sections_at(v)?;
-        let a = trace_branches(a, index, origin, d, &colour_of, pruning);
-        let b = trace_branches(b, index, origin, d, &colour_of, pruning);
-        Some((
-            a.colour.lerp(b.colour, wr),
-            a.dropped + wr * (b.dropped - a.dropped),
-        ))
+        let (section, pruning) = section_at(v)?;
+        let b = trace_branches(section, index, origin, d, &colour_of, pruning);
+        Some((b.colour, b.dropped))
     };
     let lens_period = |px: usize, py: usize, k: usize, rng: &mut SplitMix64| {
         let target = shot.target(px as f64 + 0.5, py as f64 + 0.5);
@@ -839,7 +837,7 @@ pub fn render_traced(
         // through the sections, phases are interpolated as the lattice's
         // are; through the mesh each is traced (the mesh tracer is the
         // reference the sections are held to)
-        let (sum, dropped) = if sections_at(v).is_some() {
+        let (sum, dropped) = if section_at(v).is_some() {
             let (c, d) = phase_mean(k, &|m| sample(m, &mut SplitMix64(0)));
             (c * k as f64, d * k as f64)
         } else {
