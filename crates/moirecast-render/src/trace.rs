@@ -187,6 +187,9 @@ pub struct Branches {
     pub absorbed: f64,
     /// Weight dropped by the pruning.
     pub dropped: f64,
+    /// The heaviest branch that left the mesh: its direction and weight
+    /// (its colour is part of `colour`).
+    pub main: Option<(DVec3, f64)>,
 }
 
 /// Follows every branch of the ray from `origin` along `dir` (unit) through
@@ -208,6 +211,7 @@ pub fn trace_branches(
         left: 0.0,
         absorbed: 0.0,
         dropped: 0.0,
+        main: None,
     };
     // (origin, direction, side, weight, interfaces crossed)
     // (depth first: it never holds more than one branch per interface
@@ -218,6 +222,9 @@ pub fn trace_branches(
         let Some(hit) = scene.meet(side, origin, dir, EPSILON_MM) else {
             out.colour += weight * colour_of(dir);
             out.left += weight;
+            if out.main.is_none_or(|(_, w)| weight > w) {
+                out.main = Some((dir, weight));
+            }
             continue;
         };
         let point = origin + hit.t * dir;
