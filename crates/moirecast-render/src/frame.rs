@@ -1101,3 +1101,46 @@ pub fn render_scored(
     let fidelity = frame.fidelity();
     (frame, fidelity)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::RefCell;
+
+    /// Samples of `f` over 16 phases, and the phases traced.
+    fn sampled(f: &dyn Fn(usize) -> f64) -> (Vec<f64>, Vec<usize>) {
+        let traced = RefCell::new(Vec::new());
+        let got = phase_samples(16, &|j| {
+            traced.borrow_mut().push(j);
+            (DVec3::splat(f(j)), 0.0)
+        });
+        let mut traced = traced.into_inner();
+        traced.sort_unstable();
+        (got.iter().map(|c| c.0.x).collect(), traced)
+    }
+
+    /// A window smooth across the lens is read off parabolas through the
+    /// five phases traced first, exactly where it is a parabola.
+    #[test]
+    fn a_smooth_window_traces_five_phases() {
+        let f = |j: usize| 0.1 + 0.02 * j as f64 - 0.0005 * (j * j) as f64;
+        let (got, traced) = sampled(&f);
+        assert_eq!(traced, vec![0, 4, 8, 12, 15]);
+        for (j, g) in got.iter().enumerate() {
+            assert!((g - f(j)).abs() < 1e-12, "phase {j}: {g} against {}", f(j));
+        }
+    }
+
+    /// A jump (a ray crossing a crease) is traced down to the two phases
+    /// either side of it, and every phase comes out as traced.
+    #[test]
+    fn a_jump_is_traced_down_to_single_phases() {
+        let f = |j: usize| if j < 9 { 0.2 } else { 0.8 };
+        let (got, traced) = sampled(&f);
+        assert!(traced.contains(&8) && traced.contains(&9), "{traced:?}");
+        assert!(traced.len() < 16, "{traced:?}");
+        for (j, g) in got.iter().enumerate() {
+            assert!((g - f(j)).abs() < 1e-12, "phase {j}: {g}");
+        }
+    }
+}
