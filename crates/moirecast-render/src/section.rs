@@ -240,8 +240,6 @@ struct ArcRow {
     /// `before[k]`: of arcs ..k (EMPTY at 0).
     after: Vec<(f64, f64)>,
     before: Vec<(f64, f64)>,
-    /// The row's z extent: a ray outside it meets nothing.
-    z: (f64, f64),
     /// The first arc's x and arcs per mm across the row: where to start
     /// looking for the arc at an x (the arcs are about equally wide).
     x_first: f64,
@@ -264,13 +262,17 @@ impl ArcRow {
             _ => (0.0, 0.0),
         };
         ArcRow {
-            z: after[0],
             arcs,
             after,
             before,
             x_first,
             arcs_per_mm,
         }
+    }
+
+    /// The row's z extent: a ray outside it meets nothing.
+    fn z(&self) -> (f64, f64) {
+        self.after[0]
     }
 
     /// The nearest meeting in (`t_min`, `t_max`] within `walls` (x):
@@ -289,17 +291,17 @@ impl ArcRow {
         let (o, d) = (ray.o, ray.d);
         // where the search starts: at t_min, or where the ray enters the
         // row's z extent if it starts outside it, heading in
-        let z_min = o.y + t_min * d.y;
-        let t_start = if z_min > self.z.1 {
+        let (z_min, z) = (o.y + t_min * d.y, self.z());
+        let t_start = if z_min > z.1 {
             if d.y >= 0.0 {
                 return None;
             }
-            (self.z.1 - o.y) / d.y
-        } else if z_min < self.z.0 {
+            (z.1 - o.y) / d.y
+        } else if z_min < z.0 {
             if d.y <= 0.0 {
                 return None;
             }
-            (self.z.0 - o.y) / d.y
+            (z.0 - o.y) / d.y
         } else {
             t_min
         };
@@ -729,7 +731,7 @@ impl<'d> Sections<'d> {
         for r in 0..self.rows.len() {
             let s = self.section(r)?;
             (lo.x, hi.x) = (lo.x.min(s.walls.0), hi.x.max(s.walls.1));
-            let z = union(s.top.z, s.base.z);
+            let z = union(s.top.z(), s.base.z());
             (lo.z, hi.z) = (lo.z.min(z.0), hi.z.max(z.1));
         }
         Some((lo, hi))
