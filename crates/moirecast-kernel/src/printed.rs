@@ -308,6 +308,27 @@ fn band_touches_wall(design: &Design, problem: String) -> KernelError {
     .into()
 }
 
+/// A printed design refused because one band covers the whole base layer:
+/// with no clear gap down to the backing, no level line shows and the clear
+/// body would be two pieces (the lenses above the band, the backing below).
+/// Only a layout about one period wide can do this.
+fn bands_cover_base(design: &Design) -> KernelError {
+    let BaseKind::Printed(pb) = design.params.base.kind else {
+        unreachable!("callers build printed designs only")
+    };
+    crate::DesignError {
+        param: crate::Param::Duty,
+        value: pb.duty.to_string(),
+        problem: format!(
+            "one black band covers the whole base layer (the layout is {:.2} periods wide): \
+             no clear gap shows a level line, and the clear body would come apart",
+            design.params.width / design.params.period
+        ),
+        fix: "lower base.duty, or widen layout.width to two periods or more".into(),
+    }
+    .into()
+}
+
 /// The side wall nearest to `p` (a point of the outline).
 fn wall_side(design: &Design, p: DVec3) -> Side {
     let (xl, xr) = design.outline_x;
@@ -402,6 +423,9 @@ fn faces_of_s(
             s_tris.push((*t, black));
             s_index.push(ti);
         }
+    }
+    if !s_tris.iter().any(|&(_, black)| !black) {
+        return Err(bands_cover_base(design));
     }
     let mut on_s = EdgeMap::new(pos.len(), &s_tris);
     let repair = repair_wall_touches(design, pos, &mut s_tris, &mut on_s)?;
