@@ -273,13 +273,29 @@ pub fn cuboid(lo: DVec3, hi: DVec3) -> Result<Manifold> {
 /// centred on a symmetric device's middle, or on the parting line, would
 /// otherwise run an edge along a wall's rung or through the skirt, and the
 /// booleans would leave vertices nanometres apart there.
-const HALF_FACET_DEG: f64 = 180.0 / CIRCLE_SEGMENTS as f64;
+pub const HALF_FACET_DEG: f64 = 180.0 / CIRCLE_SEGMENTS as f64;
 
 /// A further turn (degrees) of the channels' polygons: a quarter facet,
 /// still clear of the axes. The mold takes it when a channel's edge happens
 /// to cross a wall within nanometres of a device vertex, a sliver manifold
 /// will not collapse.
 pub const QUARTER_FACET_DEG: f64 = HALF_FACET_DEG / 2.0;
+
+/// The polygon of a horizontal channel of radius `r` in its cross-section,
+/// its polygon turned `twist` degrees past the half facet: each vertex as
+/// (across the axis, up from it), in order around the polygon. Which way
+/// "across" points depends on the channel's direction, so a caller that
+/// needs every case also takes the mirror image (`twist` → −`twist` − 2 ×
+/// half facet, the polygon at −α for every vertex angle α).
+pub fn channel_section(r: f64, twist: f64) -> Vec<DVec2> {
+    (0..CIRCLE_SEGMENTS)
+        .map(|k| {
+            let a = (HALF_FACET_DEG + twist + 360.0 * f64::from(k) / f64::from(CIRCLE_SEGMENTS))
+                .to_radians();
+            DVec2::new(r * a.sin(), -r * a.cos())
+        })
+        .collect()
+}
 
 /// A vertical frustum over `axis` from `z0` (radius `r0`) to `z1` (radius
 /// `r1`), its polygon turned `twist` degrees past the half facet.

@@ -3,6 +3,7 @@
 //! placement is checked against the device and the block here, before any
 //! boolean runs, so a misfit is an error that names the parameter and place.
 
+use crate::boolean::{channel_section, QUARTER_FACET_DEG};
 use crate::error::{MoldError, MoldParam, Result};
 use crate::params::{MoldParams, MIN_WALL_MM};
 use crate::parting::{HeightQuery, Polyline, PosedDevice, Rect, Wall, WallCurves};
@@ -134,13 +135,10 @@ fn gate_fix(widest: f64) -> String {
     }
 }
 
-/// Margin on the runner's circle for [`runner_cuts_island`] (mm): the
-/// runner is a polygon, a little inside its circle.
-const RUNNER_ISLAND_MARGIN_MM: f64 = 0.01;
-
-/// Samples across a runner's width for [`runner_cuts_island`], besides the
-/// parting line's own breakpoints.
-const RUNNER_WIDTH_SAMPLES: usize = 256;
+/// How close (mm) the parting line may pass over the runner's polygon and
+/// still count as over it, in [`runner_cuts_island`]: a touch within
+/// round-off is taken as a sliver, never as a joint.
+const RUNNER_TOUCH_MM: f64 = 1e-4;
 
 /// Whether a runner of radius `r` centred at height `m_g` on the parting
 /// line `mid` (carried straight out from the wall, so the same in every
@@ -149,26 +147,54 @@ const RUNNER_WIDTH_SAMPLES: usize = 256;
 /// inside the runner's width. Such a stretch does not reach the runner's
 /// sides, where the half's material would hold it (found-71819e0da782288f:
 /// a second shell of the bottom half along the runner).
+///
+/// The runner is the polygon the cut uses, at each turn the cut may take
+/// and its mirror image, not its circle: a margin on the circle merged a
+/// sliver 1 µm over the polygon with the stretch beside it, 8 µm inside
+/// (found-dfeb79e5db90b7e2). The parting line and the polygon's top and
+/// floor are both piecewise linear across the width, so their order at the
+/// breakpoints of both decides every stretch exactly.
 fn runner_cuts_island(mid: &Polyline, t_g: f64, m_g: f64, r: f64) -> bool {
-    let (a, b) = (t_g - r, t_g + r);
-    let mut ts: Vec<f64> = (0..=RUNNER_WIDTH_SAMPLES)
-        .map(|k| a + (b - a) * k as f64 / RUNNER_WIDTH_SAMPLES as f64)
-        .chain(mid.t.iter().copied().filter(|&t| t > a && t < b))
+    let half = crate::boolean::HALF_FACET_DEG;
+    [0.0, QUARTER_FACET_DEG, -QUARTER_FACET_DEG - 2.0 * half]
+        .into_iter()
+        .any(|twist| polygon_cuts_island(mid, t_g, m_g, &channel_section(r, twist)))
+}
+
+/// [`runner_cuts_island`] for one polygon `section` (across, up) of the
+/// runner.
+fn polygon_cuts_island(mid: &Polyline, t_g: f64, m_g: f64, section: &[DVec2]) -> bool {
+    let (a, b) = section
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.x), hi.max(p.x))
+        });
+    let mut ts: Vec<f64> = section
+        .iter()
+        .map(|p| t_g + p.x)
+        .chain(
+            mid.t
+                .iter()
+                .copied()
+                .filter(|&t| t > t_g + a && t < t_g + b),
+        )
         .collect();
     ts.sort_by(f64::total_cmp);
-    // +1 over the top, -1 under the floor, 0 inside the circle
-    let side = |t: f64| {
-        let half = (r * r - (t - t_g) * (t - t_g)).max(0.0).sqrt();
-        let z = mid.eval(t);
-        if z > m_g + half - RUNNER_ISLAND_MARGIN_MM {
-            1
-        } else if z < m_g - half + RUNNER_ISLAND_MARGIN_MM {
-            -1
-        } else {
-            0
-        }
-    };
-    let sides: Vec<i32> = ts.iter().map(|&t| side(t)).collect();
+    // +1 over the top, -1 under the floor, 0 inside the polygon
+    let sides: Vec<i32> = ts
+        .iter()
+        .map(|&t| {
+            let (floor, top) = polygon_span(section, (t - t_g).clamp(a, b));
+            let z = mid.eval(t) - m_g;
+            if z > top - RUNNER_TOUCH_MM {
+                1
+            } else if z < floor + RUNNER_TOUCH_MM {
+                -1
+            } else {
+                0
+            }
+        })
+        .collect();
     // a run of +1 (or -1) that touches neither end of the width is loose
     let (first, last) = (sides[0], sides[sides.len() - 1]);
     let mut k = 0;
@@ -184,6 +210,24 @@ fn runner_cuts_island(mid: &Polyline, t_g: f64, m_g: f64, r: f64) -> bool {
         }
     }
     false
+}
+
+/// The floor and top of the polygon `section` (across, up) at `s` across.
+fn polygon_span(section: &[DVec2], s: f64) -> (f64, f64) {
+    let mut range = (f64::INFINITY, f64::NEG_INFINITY);
+    for (p, q) in section.iter().zip(section.iter().cycle().skip(1)) {
+        let (lo, hi) = (p.x.min(q.x), p.x.max(q.x));
+        if s < lo || s > hi {
+            continue;
+        }
+        let z = if hi > lo {
+            p.y + (q.y - p.y) * (s - p.x) / (q.x - p.x)
+        } else {
+            p.y.max(q.y)
+        };
+        range = (range.0.min(z), range.1.max(z));
+    }
+    range
 }
 
 /// A smooth (lens-ripple-free) surface of the posed device on a grid over
@@ -980,5 +1024,41 @@ pub fn block_rect(f: &Features) -> Rect {
         x1: f.block_hi.x,
         y0: f.block_lo.y,
         y1: f.block_hi.y,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A parting line across a runner of radius 0.5 centred at height 0:
+    /// inside the runner, then `over` above its top at 0.34 across, then
+    /// 8 µm inside again, then out over the top to the runner's side.
+    fn ridge(over: f64) -> Polyline {
+        let top = |s: f64| polygon_span(&channel_section(0.5, 0.0), s).1;
+        let t = vec![-0.6, 0.0, 0.3188, 0.3439, 0.3687, 0.4, 0.6];
+        let z = vec![
+            0.0,
+            0.0,
+            top(0.3188) - 0.05,
+            top(0.3439) + over,
+            top(0.3687) - 0.008,
+            top(0.4) + 0.05,
+            0.3,
+        ];
+        Polyline { t, z }
+    }
+
+    #[test]
+    fn a_micron_ridge_over_the_runner_is_a_loose_sliver() {
+        // found-dfeb79e5db90b7e2: a margin of 0.01 mm on the circle took
+        // the stretch 8 µm inside for "over" and joined the ridge to it
+        assert!(runner_cuts_island(&ridge(1e-3), 0.0, 0.0, 0.5));
+    }
+
+    #[test]
+    fn a_parting_line_that_stays_inside_past_the_ridge_cuts_nothing() {
+        // the same line, its ridge under the runner's top
+        assert!(!runner_cuts_island(&ridge(-2e-3), 0.0, 0.0, 0.5));
     }
 }
