@@ -205,15 +205,16 @@ impl LensFamily {
                     // between the first stations the spans bend more
                     pieces *= 2;
                 }
-                // The independent sample found a band span's edges moving
-                // between stations where the refinement's midpoints did
-                // not (found-74146f9018634401: 0.21 µm at a third of a
-                // 1.9 mm span against a 0.018 µm fit, the creases following
-                // a gray image's blurred edge): those samples become
-                // stations, and the refinement goes on from there.
-                Ok(Refined { family, misses })
-                    if exact.has_spans() && !misses.is_empty() && restarts < MAX_RESTARTS =>
-                {
+                // The independent sample found a face moving between
+                // stations where the refinement's midpoints did not: a
+                // band span's edges (found-74146f9018634401: 0.21 µm at a
+                // third of a 1.9 mm span against a 0.018 µm fit, the
+                // creases following a gray image's blurred edge), or a
+                // base lens's edge (found-fae34bbfc624b3e3: 1.8 µm at
+                // t = 0.05 against a 0.094 µm fit, a shape profile's
+                // 0.07 mm blur). Those samples become stations, and the
+                // refinement goes on from there.
+                Ok(Refined { family, misses }) if !misses.is_empty() && restarts < MAX_RESTARTS => {
                     stations = family.stations;
                     stations.extend(misses);
                     stations.sort_by(f64::total_cmp);
