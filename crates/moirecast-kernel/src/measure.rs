@@ -72,8 +72,19 @@ pub fn revealer_lens_stats(design: &Design, dm: &DeviceMesh) -> LensStats {
                 circle_residual: 0.0,
                 arcs: 0,
             };
+            let station = dm.revealer_rows[r];
             for (i, &cols) in dm.revealer_columns.iter().enumerate() {
                 let p = |j: usize| dm.mesh.positions[dm.revealer_vertex(r, i, j) as usize];
+                // rows next to a wall that a leaning lens reaches past are
+                // solved onto heights, not at one station: no arcs
+                let on_station = (0..=cols).all(|j| {
+                    dm.origins[dm.revealer_vertex(r, i, j) as usize]
+                        .params_on(LensRef::Revealer(i as i64))
+                        .is_some_and(|q| q.y == station)
+                });
+                if !on_station {
+                    continue;
+                }
                 let (a, m, b) = (p(0), p(cols / 2), p(cols));
                 let Some((c, rad)) = circumcircle(a, m, b) else {
                     continue;
