@@ -34,8 +34,16 @@ const PEAK_SLACK: f64 = 1.25;
 /// shear (see [`sheared_columns`]) may add before the lens gets more
 /// columns: a small part of the tolerance's margin.
 const SHEAR_SLACK: f64 = 0.02;
-/// Cells of the curvature survey along y.
+/// Cells of the curvature survey along y, at least: a long layout gets
+/// cells no longer than [`SURVEY_CELL_PERIODS`] periods.
 const SURVEY_CELLS: usize = 256;
+/// Longest survey cell (periods). A second difference over cells wider
+/// than a bend sees a fraction of its curvature: 256 cells over a layout
+/// 570 mm long are 2.2 mm, and the rows they placed over a bump 1.5 mm
+/// wide missed the tolerance by 34 % (found-49fb65d011976b14). A lens array
+/// cannot follow a surface that bends within a lens, so bends a lens wide
+/// or wider are the ones to see.
+const SURVEY_CELL_PERIODS: f64 = 0.5;
 /// Most cells of the base's survey, however fine its profile.
 const MAX_SURVEY_CELLS: usize = 16384;
 
@@ -320,13 +328,21 @@ impl<'a> Planner<'a> {
     }
 
     /// Survey stations: `cells` uniform cells over [−H/2 − pad, H/2 + pad].
+    /// Cells over `length` (mm): `usual`, or more where those would be
+    /// longer than [`SURVEY_CELL_PERIODS`].
+    fn cells_over(&self, length: f64, usual: usize) -> usize {
+        let by_period = (length / (SURVEY_CELL_PERIODS * self.design.params.period)).ceil();
+        (by_period.min(MAX_SURVEY_CELLS as f64) as usize).max(usual)
+    }
+
     fn survey_stations(&self, pad: f64, cells: usize) -> (Vec<f64>, f64) {
         let hh = self.design.half_height + pad;
         let h = 2.0 * hh / cells as f64;
         ((0..=cells).map(|s| -hh + s as f64 * h).collect(), h)
     }
 
-    /// Cells of the base's survey: [`SURVEY_CELLS`], or as many as it takes
+    /// Cells of the base's survey: [`SURVEY_CELLS`] (more over a long layout,
+    /// see [`Self::cells_over`]), or as many as it takes
     /// for a cell to be a quarter of the profile's detail where the usual
     /// cells are coarser than the survey can follow, so the base creases'
     /// curvature along y is seen: more than twice the detail for a sampled
@@ -342,7 +358,8 @@ impl<'a> Planner<'a> {
     fn base_survey_cells(&self, pad: f64) -> usize {
         let hh = self.design.half_height;
         let length = 2.0 * (hh + pad);
-        let usual = ((SURVEY_CELLS as f64 * (hh + pad) / (hh + pad.min(hh))).ceil() as usize)
+        let over_layout = self.cells_over(2.0 * hh, SURVEY_CELLS);
+        let usual = ((over_layout as f64 * (hh + pad) / (hh + pad.min(hh))).ceil() as usize)
             .clamp(SURVEY_CELLS, MAX_SURVEY_CELLS);
         let profile = &self.design.params.profile;
         let coarsest = |detail: f64| match profile {
@@ -454,7 +471,8 @@ impl<'a> Planner<'a> {
     /// Revealer: columns per lens, and rows (stations).
     fn revealer_plan(&self) -> (Vec<usize>, Vec<f64>, f64) {
         let d = self.design;
-        let (stations, h) = self.survey_stations(0.0, SURVEY_CELLS);
+        let cells = self.cells_over(2.0 * d.half_height, SURVEY_CELLS);
+        let (stations, h) = self.survey_stations(0.0, cells);
         let surveys: Vec<LensSurvey> = (0..d.lenses as i64)
             .into_par_iter()
             .map(|i| {
@@ -466,7 +484,7 @@ impl<'a> Planner<'a> {
             })
             .collect();
         let columns: Vec<usize> = surveys.iter().map(|s| s.columns).collect();
-        let k: Vec<f64> = (0..SURVEY_CELLS)
+        let k: Vec<f64> = (0..cells)
             .map(|c| {
                 surveys
                     .iter()
