@@ -308,23 +308,38 @@ fn band_touches_wall(design: &Design, problem: String) -> KernelError {
     .into()
 }
 
-/// A printed design refused because one band covers the whole base layer:
-/// with no clear gap down to the backing, no level line shows and the clear
-/// body would be two pieces (the lenses above the band, the backing below).
-/// Only a layout about one period wide can do this.
-fn bands_cover_base(design: &Design) -> KernelError {
+/// A printed design refused because its base layer is one colour: one
+/// band covers all of it (`black`), or no band reaches it. Either way no
+/// level line shows; a whole black layer would also split the clear body
+/// in two (the lenses above it, the backing below), and no band leaves no
+/// black body. Only a layout about one period wide can do this.
+fn one_colour_base(design: &Design, black: bool) -> KernelError {
     let BaseKind::Printed(pb) = design.params.base.kind else {
         unreachable!("callers build printed designs only")
+    };
+    let periods = design.params.width / design.params.period;
+    let (problem, fix) = if black {
+        (
+            format!(
+                "one black band covers the whole base layer (the layout is {periods:.2} periods wide): \
+                 no clear gap shows a level line, and the clear body would come apart"
+            ),
+            "lower base.duty, or widen layout.width to two periods or more",
+        )
+    } else {
+        (
+            format!(
+                "no black band reaches the base layer (the layout is {periods:.2} periods wide): \
+                 there is nothing to show a level line"
+            ),
+            "raise base.duty, or widen layout.width to two periods or more",
+        )
     };
     crate::DesignError {
         param: crate::Param::Duty,
         value: pb.duty.to_string(),
-        problem: format!(
-            "one black band covers the whole base layer (the layout is {:.2} periods wide): \
-             no clear gap shows a level line, and the clear body would come apart",
-            design.params.width / design.params.period
-        ),
-        fix: "lower base.duty, or widen layout.width to two periods or more".into(),
+        problem,
+        fix: fix.into(),
     }
     .into()
 }
@@ -424,8 +439,10 @@ fn faces_of_s(
             s_index.push(ti);
         }
     }
-    if !s_tris.iter().any(|&(_, black)| !black) {
-        return Err(bands_cover_base(design));
+    for black in [false, true] {
+        if !s_tris.iter().any(|&(_, b)| b == black) {
+            return Err(one_colour_base(design, !black));
+        }
     }
     let mut on_s = EdgeMap::new(pos.len(), &s_tris);
     let repair = repair_wall_touches(design, pos, &mut s_tris, &mut on_s)?;
