@@ -397,7 +397,16 @@ fn row_creases(d: &Design, y: f64) -> Result<Vec<(f64, DVec3)>> {
         let mut found = None;
         let mut last_residual = f64::INFINITY;
         for _ in 0..40 {
-            let (p, u) = point(v, u_near)?;
+            // beyond the extended layout the surface may not be defined
+            // (a small sphere: found-85f5e81e0faf8692, a crease 14 periods
+            // out stepped to v = NaN); the crease is outside there anyway
+            let (p, u) = match point(v, u_near) {
+                Ok((p, u)) if p.is_finite() => (p, u),
+                Ok(_) | Err(_) if u_near.is_some_and(|u| d.beyond_extended_layout(u).is_some()) => {
+                    break;
+                }
+                result => result?,
+            };
             u_near = Some(u);
             let r = p.y - y;
             if r.abs() <= SOLVE_RESIDUAL_MM {
