@@ -35,32 +35,30 @@ pub(super) fn vertices(
     let row_len = rev_columns.iter().sum::<usize>() + 1;
     let last_row = rev_rows.len() - 1;
     progress.stage("revealer vertices", rev_rows.len() as u64);
-    let rev_vertices: Vec<RevealerRow> = rev_rows
+    let mut rev_vertices: Vec<RevealerRow> = rev_rows
         .par_iter()
         .enumerate()
         .map(|(r, &v)| {
-            let boundary = (r == 0 || r == last_row).then_some(if r == 0 { -hh } else { hh });
-            let mut out = Vec::with_capacity(row_len);
-            for (i, &cols) in rev_columns.iter().enumerate().take(n) {
-                let arc = d.revealer_arc(i as i64, v);
-                let first = if i == 0 { 0 } else { 1 };
-                for j in first..=cols {
-                    let t = j as f64 / cols as f64;
-                    let (p, vv) = match boundary {
-                        None => (arc.point(t), v),
-                        Some(y) => {
-                            let vv = d.solve_station_for_y(LensRef::Revealer(i as i64), t, y, v)?;
-                            (d.revealer_point(i as i64, t, vv), vv)
-                        }
-                    };
-                    out.push((p, origin(i, j, cols, t, vv)));
+            // the wall rows are solved onto y = ±H/2, the others are arcs
+            let row = if r == 0 || r == last_row {
+                let y = if r == 0 { -hh } else { hh };
+                row_onto(d, rev_columns, v, |_| y)?
+            } else {
+                let mut out = Vec::with_capacity(row_len);
+                for (i, &cols) in rev_columns.iter().enumerate().take(n) {
+                    let arc = d.revealer_arc(i as i64, v);
+                    let first = if i == 0 { 0 } else { 1 };
+                    for j in first..=cols {
+                        let t = j as f64 / cols as f64;
+                        out.push((arc.point(t), origin(i, j, cols, t, v)));
+                    }
                 }
-            }
+                out
+            };
             progress.tick(1);
-            Ok(out)
+            Ok(row)
         })
         .collect::<Result<_>>()?;
-    let mut rev_vertices = rev_vertices;
     blend_edge_rows(d, rev_rows, rev_columns, &mut rev_vertices)?;
     // rows must not cross: every column's y increases from row to row
     for r in 0..last_row {
