@@ -643,6 +643,7 @@ impl Design {
         let (mut kmax, mut smax, mut dmax, mut fold_at) = (0.0f64, 0.0f64, 0.0f64, DVec2::ZERO);
         let mut shallowest = (f64::INFINITY, DVec2::ZERO);
         let (mut smax_inside, mut steep_at) = (0.0f64, DVec2::ZERO);
+        let mut steepest_base = (0.0f64, DVec2::ZERO);
         let (hw, hh) = (self.params.width / 2.0, self.half_height);
         let mut worst_fold = 0.0f64;
         let pts: Vec<DVec2> = self.grid(64).collect();
@@ -676,6 +677,12 @@ impl Design {
             if d_eff * k > worst_fold {
                 worst_fold = d_eff * k;
                 fold_at = q;
+            }
+            if self.params.base.a > 0.0 {
+                let base_slope = self.base_normal(q.x, q.y).z.clamp(-1.0, 1.0).acos();
+                if base_slope.is_nan() || base_slope > steepest_base.0 {
+                    steepest_base = (base_slope, q);
+                }
             }
             kmax = kmax.max(k);
             if slope > smax {
@@ -754,6 +761,7 @@ impl Design {
                 "use a larger radius, a smaller layout or a smaller AFOV",
             ));
         }
+        self.validate_base_flank(steepest_base, base_afov)?;
         // The layout beyond the edge must hold the base's own points under
         // the outline. Where the base lies well inside a tight cylinder, it
         // spreads less in x than the layout does in u, and d_max of layout
@@ -767,6 +775,38 @@ impl Design {
         }
         self.margin = reach + (self.params.base.levels + 2.0) * self.params.period;
         self.validate_equal_radius_chords()
+    }
+
+    /// With a > 0 the base surface is no offset of f: its depth D_s·λ
+    /// changes across the surface, and where the curvature changes fast it
+    /// tilts further than f does (found-07be06007bd9ec48: 49° under a bump
+    /// of 34°). Its lenses' flanks count from its own slope.
+    fn validate_base_flank(
+        &self,
+        (slope, at): (f64, DVec2),
+        base_afov: f64,
+    ) -> Result<(), DesignError> {
+        let half_afov = match self.params.base.kind {
+            BaseKind::DualLens => base_afov / 2.0,
+            BaseKind::Printed(_) => 0.0,
+        };
+        let flank = (slope + half_afov).to_degrees();
+        if flank.is_nan() || flank > limits::MAX_FLANK_DEG {
+            return Err(err(
+                Param::BaseA,
+                self.params.base.a,
+                format!(
+                    "the base surface between the offset and the focal surface slopes {:.1}° at layout ({:.1}, {:.1}) mm, and its lenses add {:.1}°: their flanks reach {flank:.1}°, over the {}° limit (the device must stay a graph over xy)",
+                    slope.to_degrees(),
+                    at.x,
+                    at.y,
+                    half_afov.to_degrees(),
+                    limits::MAX_FLANK_DEG
+                ),
+                "use a smaller a, a smaller AFOV or a surface whose curvature changes more slowly",
+            ));
+        }
+        Ok(())
     }
 
     /// Whether the base surface `reach` beyond the layout's edges lies

@@ -152,13 +152,21 @@ fn lens_of(design: &Design, o: &VertexOrigin) -> LensRef {
 /// vertex may land (round-off at the creases).
 const ON_LENS_SLACK: f64 = 1e-6;
 
-/// Vertical distance (mm) from every `stride`-th vertex to its exact lens
-/// surface, found afresh: solve the lens parameters (t, v) whose point has
-/// the vertex's x and y, and compare z. The solve starts at the lens's
-/// middle (t = ½) at the station whose middle point has the vertex's y, so
-/// that on a steep lens it finds the point of the lens itself, not one of
-/// the arc's circle continued past a crease; a solution off the lens
-/// (t outside [0, 1]) is a failure.
+/// Where on its lens (t across) the vertical re-projection of a vertex
+/// starts: the middle first, then the two creases. On a steep lens over a
+/// strongly curved base the lens may overhang, so that two of its points
+/// share x and y; the vertex lies on the lens if any of them is its point,
+/// and the smallest gap is the measure.
+const REPROJECTION_STARTS: [f64; 3] = [0.5, 0.0, 1.0];
+
+/// Distance (mm) from every `stride`-th vertex to its exact lens surface,
+/// found afresh: solve the lens parameters (t, v) whose point has the
+/// vertex's x and y, and measure the gap along the lens's normal there. Each solve starts at a point across
+/// the lens (`REPROJECTION_STARTS`) at the station whose point there has
+/// the vertex's y, so that on a steep lens it finds a point of the lens
+/// itself, not one of the arc's circle continued past a crease; a solution
+/// off the lens (t outside [0, 1]) does not count, and a vertex with no
+/// solution on its lens fails.
 pub fn vertex_on_surface(design: &Design, dm: &DeviceMesh, stride: usize) -> CheckResult {
     let worst = (0..dm.mesh.positions.len())
         .into_par_iter()
@@ -166,26 +174,13 @@ pub fn vertex_on_surface(design: &Design, dm: &DeviceMesh, stride: usize) -> Che
         .map(|vi| {
             let p = dm.mesh.positions[vi];
             let lens = lens_of(design, &dm.origins[vi]);
-            let station = crate::solve::newton_1d(p.y, &String::new, |v| {
-                design
-                    .lens_point(lens, 0.5, v)
-                    .map(|s| s.y - p.y)
-                    .unwrap_or(f64::NAN)
-            })
-            .unwrap_or(p.y);
-            let solved = newton_2d(DVec2::new(0.5, station), &|| String::new(), |q| {
-                design
-                    .lens_point(lens, q.x, q.y)
-                    .map(|s| DVec2::new(s.x - p.x, s.y - p.y))
-                    .unwrap_or(DVec2::NAN)
-            });
-            let dist = match solved {
-                Ok(q) if (-ON_LENS_SLACK..=1.0 + ON_LENS_SLACK).contains(&q.x) => design
-                    .lens_point(lens, q.x, q.y)
-                    .map(|s| (s.z - p.z).abs())
-                    .unwrap_or(f64::INFINITY),
-                _ => f64::INFINITY,
-            };
+            let mut dist = f64::INFINITY;
+            for t0 in REPROJECTION_STARTS {
+                dist = dist.min(vertical_gap(design, lens, p, t0));
+                if dist <= VERTEX_ON_SURFACE_MM {
+                    break;
+                }
+            }
             (dist, vi)
         })
         .reduce(
@@ -202,7 +197,7 @@ pub fn vertex_on_surface(design: &Design, dm: &DeviceMesh, stride: usize) -> Che
     CheckResult::at_most(
         "vertex-on-surface",
         worst.0,
-        1e-9,
+        VERTEX_ON_SURFACE_MM,
         "mm",
         format!(
             "{} re-projected; worst at ({:.3}, {:.3}, {:.3})",
@@ -213,6 +208,50 @@ pub fn vertex_on_surface(design: &Design, dm: &DeviceMesh, stride: usize) -> Che
         ),
     )
 }
+
+/// The limit of `vertex-on-surface`: a vertex is a solved point of its
+/// lens, so only round-off separates it from the surface.
+const VERTEX_ON_SURFACE_MM: f64 = 1e-9;
+
+/// Distance from `p` to `lens`, measured along the lens's normal at the
+/// lens point with p's x and y, solved from `t0` across the lens; infinite
+/// when the solve fails or lands off the lens. The normal, not z: where the
+/// lens is nearly vertical, a round-off step in x or y is a large step in z.
+fn vertical_gap(design: &Design, lens: LensRef, p: DVec3, t0: f64) -> f64 {
+    let station = crate::solve::newton_1d(p.y, &String::new, |v| {
+        design
+            .lens_point(lens, t0, v)
+            .map(|s| s.y - p.y)
+            .unwrap_or(f64::NAN)
+    })
+    .unwrap_or(p.y);
+    let solved = newton_2d(DVec2::new(t0, station), &|| String::new(), |q| {
+        design
+            .lens_point(lens, q.x, q.y)
+            .map(|s| DVec2::new(s.x - p.x, s.y - p.y))
+            .unwrap_or(DVec2::NAN)
+    });
+    let gap = |q: DVec2| -> Option<f64> {
+        let s = design.lens_point(lens, q.x, q.y).ok()?;
+        let along_t = design.lens_point(lens, q.x + NORMAL_STEP, q.y).ok()?
+            - design.lens_point(lens, q.x - NORMAL_STEP, q.y).ok()?;
+        let along_v = design.lens_point(lens, q.x, q.y + NORMAL_STEP).ok()?
+            - design.lens_point(lens, q.x, q.y - NORMAL_STEP).ok()?;
+        let normal = along_t.cross(along_v).try_normalize()?;
+        Some((s - p).dot(normal).abs())
+    };
+    match solved {
+        Ok(q) if (-ON_LENS_SLACK..=1.0 + ON_LENS_SLACK).contains(&q.x) => {
+            gap(q).unwrap_or(f64::INFINITY)
+        }
+        _ => f64::INFINITY,
+    }
+}
+
+/// Parameter step of the central differences that give a lens's normal in
+/// `vertical_gap`; the normal only projects a gap of round-off size, so its
+/// own error of order step² does not matter.
+const NORMAL_STEP: f64 = 1e-5;
 
 /// Barycentric sample points inside a triangle.
 const SAMPLES: [[f64; 3]; 7] = [
