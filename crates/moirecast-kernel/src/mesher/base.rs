@@ -105,7 +105,6 @@ pub(super) fn rows(
 /// outline: found by sampling the crease's distance to each wall finely
 /// over the stations that can reach between the rows.
 fn missed_crossings(d: &Design, ys: &[f64], rows: &[BaseRow]) -> Result<Vec<f64>> {
-    const SAMPLES: usize = 512;
     // a lens with two or more vertices on one row and none on the next
     // (what `strips` cannot zip)
     let unmatched = |a: &BaseRow, b: &BaseRow| -> Vec<i64> {
@@ -124,39 +123,86 @@ fn missed_crossings(d: &Design, ys: &[f64], rows: &[BaseRow]) -> Result<Vec<f64>
             for crease in [k, k + 1] {
                 for wall in [d.outline_x.0, d.outline_x.1] {
                     // the base lies up to the margin off its station in y
-                    let (v0, v1) = (y0 - d.margin, y1 + d.margin);
-                    let g = |v: f64| {
-                        d.base_crease_point(crease, v)
-                            .map(|p| (p.x - wall, p.y))
-                            .unwrap_or((f64::NAN, f64::NAN))
-                    };
-                    let mut last = g(v0);
-                    for i in 1..=SAMPLES {
-                        let v = v0 + (v1 - v0) * i as f64 / SAMPLES as f64;
-                        let here = g(v);
-                        if (last.0 > 0.0) != (here.0 > 0.0)
-                            && last.0.is_finite()
-                            && here.0.is_finite()
-                        {
-                            let root = crate::solve::bracketed_secant(
-                                v - (v1 - v0) / SAMPLES as f64,
-                                v,
-                                &|| format!("base crease {crease} meeting the wall x = {wall}"),
-                                |v| g(v).0,
-                            )?;
-                            let y = d.base_crease_point(crease, root)?.y;
-                            if y > y0 + 1e-9 && y < y1 - 1e-9 {
+                    let wide = (y0 - d.margin, y1 + d.margin);
+                    let coarse = crease_meets_wall(d, crease, wall, wide, (y0, y1))?;
+                    // a crease that only grazes the wall dips past it over
+                    // a stretch far shorter than the margin's samples
+                    // (found-65c62ceab58111fa: 4 µm of v); the stations
+                    // whose crease points lie between the rows are sampled
+                    // as finely again, and what they add is kept where the
+                    // coarse pass found nothing
+                    if let Some(stations) = crease_stations(d, crease, y0, y1) {
+                        for y in crease_meets_wall(d, crease, wall, stations, (y0, y1))? {
+                            if coarse.iter().all(|c| (c - y).abs() > SAME_CROSSING_MM) {
                                 found.push(y);
                             }
                         }
-                        last = here;
                     }
+                    found.extend(coarse);
                 }
             }
         }
     }
     found.sort_by(f64::total_cmp);
     found.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    Ok(found)
+}
+
+/// Two crossings of one crease and wall closer than this in y (mm) are one,
+/// found from two brackets; where the crease grazes the wall the root's y
+/// is only known to about the solver's residual over the crease's slant.
+const SAME_CROSSING_MM: f64 = 1e-6;
+
+/// The stations (v0 < v1) at which base crease `crease` reaches heights
+/// y0 and y1, padded by a tenth of their span; `None` if either solve fails.
+fn crease_stations(d: &Design, crease: i64, y0: f64, y1: f64) -> Option<(f64, f64)> {
+    let station = |y: f64| {
+        crate::solve::newton_1d(y, &String::new, |v| {
+            d.base_crease_point(crease, v)
+                .map(|p| p.y - y)
+                .unwrap_or(f64::NAN)
+        })
+        .ok()
+    };
+    let (va, vb) = (station(y0)?, station(y1)?);
+    let pad = 0.1 * (vb - va).abs();
+    Some((va.min(vb) - pad, va.max(vb) + pad))
+}
+
+/// Heights strictly between `heights` at which base crease `crease`
+/// crosses the wall x = `wall`, sampled over the stations `stations`.
+fn crease_meets_wall(
+    d: &Design,
+    crease: i64,
+    wall: f64,
+    (v0, v1): (f64, f64),
+    (y0, y1): (f64, f64),
+) -> Result<Vec<f64>> {
+    const SAMPLES: usize = 512;
+    let g = |v: f64| {
+        d.base_crease_point(crease, v)
+            .map(|p| p.x - wall)
+            .unwrap_or(f64::NAN)
+    };
+    let mut found = Vec::new();
+    let mut last = g(v0);
+    for i in 1..=SAMPLES {
+        let v = v0 + (v1 - v0) * i as f64 / SAMPLES as f64;
+        let here = g(v);
+        if (last > 0.0) != (here > 0.0) && last.is_finite() && here.is_finite() {
+            let root = crate::solve::bracketed_secant(
+                v - (v1 - v0) / SAMPLES as f64,
+                v,
+                &|| format!("base crease {crease} meeting the wall x = {wall}"),
+                g,
+            )?;
+            let y = d.base_crease_point(crease, root)?.y;
+            if y > y0 + 1e-9 && y < y1 - 1e-9 {
+                found.push(y);
+            }
+        }
+        last = here;
+    }
     Ok(found)
 }
 
