@@ -71,15 +71,19 @@ pub(super) fn zip(
             let thin = thickness(preferred);
             // the preferred triangle's short edge, fanned instead from the
             // next vertex of the other side: deferring it only helps if that
-            // is thicker (else the deferral repeats to the strip's far end
-            // and fans the edge from there: found-986991dc2071040e)
+            // cures the sliver. A deferral that is merely a little thicker
+            // repeats to the strip's far end and fans the edge from there
+            // (found-986991dc2071040e), folded over the whole strip when the
+            // edge slants (found-a83422ce812e1630: each vertex further along
+            // 1 % thicker, up to the edge's own 37 nm)
             let deferred = if nearer {
                 [a[i], a[i + 1], b[j + 1]]
             } else {
                 [a[i + 1], b[j + 1], b[j]]
             };
-            let sliver =
-                thin < WALL_SLIVER_MM && thickness(other) > thin && thickness(deferred) > thin;
+            let sliver = thin < WALL_SLIVER_MM
+                && thickness(other) > thin
+                && thickness(deferred) >= WALL_SLIVER_MM;
             nearer != ((folds || sliver) && faces_out(other))
         };
         let tri = if advance_a {
