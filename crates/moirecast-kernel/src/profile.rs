@@ -58,7 +58,12 @@ impl Profile {
             Profile::Rings { wavelength } => Some(wavelength / 4.0),
             Profile::Bump { sigma } => Some(*sigma),
             // the grid is as fine as the image and half the blur; its
-            // cubic interpolation bends over a few cells
+            // cubic interpolation bends over a few cells. A grid coarser
+            // than that (a large layout's 1024 cells, or the cell budget)
+            // leaves the blur no room: the image's edges bend within one
+            // cell (found-a0544021cc9fde75: 0.22 mm cells, blur 0.07 mm,
+            // creases bending over 0.4 mm)
+            Profile::Sampled(s) if s.blur < 2.0 * s.spacing => Some(0.5 * s.spacing),
             Profile::Sampled(s) => Some(2.0 * s.spacing),
         }
     }
@@ -127,6 +132,8 @@ impl Profile {
 pub struct SampledProfile {
     origin: DVec2,
     spacing: f64,
+    /// The Gaussian blur's σ (mm) the values were smoothed with.
+    blur: f64,
     nx: usize,
     ny: usize,
     values: Vec<f64>,
@@ -306,6 +313,7 @@ impl SampledProfile {
         Ok(SampledProfile {
             origin,
             spacing,
+            blur,
             nx,
             ny,
             values,
