@@ -631,18 +631,118 @@ const TOP_EDGE_SPACING_MM: f64 = 0.1;
 /// each point [`TOP_EDGE_SPACING_MM`] past the last one kept and short of
 /// the far end by as much.
 fn top_edge(border: &[DVec3], along: impl Fn(DVec3) -> f64, top_z: f64) -> Vec<DVec3> {
-    let (first, last) = (border[0], border[border.len() - 1]);
+    thinned(border, along, TOP_EDGE_SPACING_MM)
+        .into_iter()
+        .map(|p| DVec3::new(p.x, p.y, top_z))
+        .collect()
+}
+
+/// The points of `chain` (increasing `along`) kept at `spacing`: both ends,
+/// and between them each point `spacing` past the last one kept and short
+/// of the far end by as much.
+fn thinned(chain: &[DVec3], along: impl Fn(DVec3) -> f64, spacing: f64) -> Vec<DVec3> {
+    let (first, last) = (chain[0], chain[chain.len() - 1]);
     let mut kept = vec![first];
-    for &p in &border[1..border.len() - 1] {
+    for &p in &chain[1..chain.len() - 1] {
         let since = along(p) - along(kept[kept.len() - 1]);
-        if since >= TOP_EDGE_SPACING_MM && along(last) - along(p) >= TOP_EDGE_SPACING_MM {
+        if since >= spacing && along(last) - along(p) >= spacing {
             kept.push(p);
         }
     }
     kept.push(last);
-    kept.into_iter()
-        .map(|p| DVec3::new(p.x, p.y, top_z))
-        .collect()
+    kept
+}
+
+/// How far into the ring, as a share of the distance from a wall's mid
+/// curve to the grid's first row, [`ring_strip`]'s middle chain lies; its
+/// points are as far apart. Towards a corner, where the ring narrows to a
+/// wedge, both shrink with the wedge's width.
+const RING_MIDDLE_SHARE: f64 = 0.25;
+
+/// The ring between a wall's mid curve `outer` and the grid's row or
+/// column `inner` next to it, zipped. Where two mid points lie a few
+/// 1e-5 mm apart (a base crease 6e-5 mm inside the outline, its rungs
+/// split at mid-wall), a grid node a cell away meets them at a shallow
+/// angle: a sliver (found-78b8f12bc8bf0892: 7.4e-6 mm, from a node 3 mm
+/// along the wall). There the ring takes a middle chain, the mid curve
+/// thinned and moved in by [`RING_MIDDLE_SHARE`] of the ring's local
+/// width: it meets the mid points nearly square and the grid as sparsely
+/// as the grid is. The plain zip stays wherever the middle chain is no
+/// thicker, so a ring without slivers is unchanged.
+fn ring_strip(
+    b: &mut SolidBuilder,
+    outer: &[DVec3],
+    inner: &[DVec3],
+    along: impl Fn(DVec3) -> f64,
+    down: DVec3,
+) {
+    let thinnest = |ts: &[[DVec3; 3]]| {
+        ts.iter()
+            .map(|&t| triangle_altitude(t))
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mut triangles = zipped(outer, inner, &along, true);
+    if thinnest(&triangles) < CORNER_SLIVER_MM {
+        let middle = middle_chain(outer, inner, &along);
+        if middle.len() > 2 {
+            // the middle chain shares its ends with the mid curve: between
+            // them the mid curve zips to its inner points
+            let mut t = zipped(outer, &middle[1..middle.len() - 1], &along, false);
+            t.extend(zipped(&middle, inner, &along, false));
+            let faces = |t: &[DVec3; 3]| (t[1] - t[0]).cross(t[2] - t[0]).dot(down) > 0.0;
+            let upright = faces(&triangles[0]);
+            if thinnest(&t) > thinnest(&triangles) && t.iter().all(|t| faces(t) == upright) {
+                triangles = t;
+            }
+        }
+    }
+    for [p, q, r] in triangles {
+        b.triangle(p, q, r, down);
+    }
+}
+
+/// [`ring_strip`]'s middle chain: the ends of `outer`, and between them its
+/// points thinned to the local depth and moved that far towards `inner`
+/// (heights on the way to the inner chain's). The depth is
+/// [`RING_MIDDLE_SHARE`] of the ring's width, narrowing towards the ends
+/// in proportion to the corner wedge between the wall and the line from
+/// the mid curve's end to the inner chain's.
+fn middle_chain(outer: &[DVec3], inner: &[DVec3], along: &impl Fn(DVec3) -> f64) -> Vec<DVec3> {
+    let (o0, o1) = (outer[0], outer[outer.len() - 1]);
+    let (n0, n1) = (inner[0], inner[inner.len() - 1]);
+    let wall = (o1 - o0).truncate().normalize();
+    let across = (n0 - o0).truncate();
+    let inward = across - across.dot(wall) * wall;
+    let width = inward.length();
+    let inward = inward / width;
+    let depth = |a: f64| {
+        let wedge = ((a - along(o0)) / (along(n0) - along(o0)))
+            .min((along(o1) - a) / (along(o1) - along(n1)))
+            .min(1.0);
+        RING_MIDDLE_SHARE * width * wedge
+    };
+    // the inner chain is a straight row of the grid: its height at `at`
+    let inner_z = |at: f64| {
+        let k = inner
+            .partition_point(|&p| along(p) < at)
+            .clamp(1, inner.len() - 1);
+        let (p, q) = (inner[k - 1], inner[k]);
+        let s = ((at - along(p)) / (along(q) - along(p))).clamp(0.0, 1.0);
+        p.z + s * (q.z - p.z)
+    };
+    let mut middle = vec![o0];
+    let mut last_kept = along(o0);
+    for &p in &outer[1..outer.len() - 1] {
+        let a = along(p);
+        let d = depth(a);
+        if d > 0.0 && a - last_kept >= d && along(o1) - a >= d {
+            last_kept = a;
+            let moved = p.truncate() + d * inward;
+            middle.push(moved.extend(p.z + d / width * (inner_z(a) - p.z)));
+        }
+    }
+    middle.push(o1);
+    middle
 }
 
 /// Zips two polylines that run side by side (a strip between two parallel
@@ -654,10 +754,28 @@ fn zip_strip(
     along: impl Fn(DVec3) -> f64,
     outward: DVec3,
 ) {
+    for [p, q, r] in zipped(outer, inner, &along, true) {
+        b.triangle(p, q, r, outward);
+    }
+}
+
+/// [`zip_strip`]'s triangles, in order. With `normalized`, each chain's
+/// along-coordinate runs from 0 to 1 over it (chains of different lengths
+/// side by side); else both advance by the coordinate itself.
+fn zipped(
+    outer: &[DVec3],
+    inner: &[DVec3],
+    along: &impl Fn(DVec3) -> f64,
+    normalized: bool,
+) -> Vec<[DVec3; 3]> {
     let norm = |pts: &[DVec3], k: usize| {
+        if !normalized {
+            return along(pts[k]);
+        }
         let (s, e) = (along(pts[0]), along(pts[pts.len() - 1]));
         (along(pts[k]) - s) / (e - s)
     };
+    let mut triangles = Vec::with_capacity(outer.len() + inner.len());
     let (mut i, mut j) = (0, 0);
     while i + 1 < outer.len() || j + 1 < inner.len() {
         let advance_outer = if i + 1 == outer.len() {
@@ -668,13 +786,14 @@ fn zip_strip(
             norm(outer, i + 1) <= norm(inner, j + 1)
         };
         if advance_outer {
-            b.triangle(outer[i], outer[i + 1], inner[j], outward);
+            triangles.push([outer[i], outer[i + 1], inner[j]]);
             i += 1;
         } else {
-            b.triangle(outer[i], inner[j + 1], inner[j], outward);
+            triangles.push([outer[i], inner[j + 1], inner[j]]);
             j += 1;
         }
     }
+    triangles
 }
 
 /// Which side of the parting surface a region lies on.
@@ -1005,7 +1124,7 @@ fn grid_floor(
         corner_fan(b, &mut outer, (wa, end_a), (wb, end_b), n, down);
     }
     for (w, outer) in Wall::ALL.into_iter().zip(&outer) {
-        zip_strip(b, outer, &inner(w), |p| w.along(p), down);
+        ring_strip(b, outer, &inner(w), |p| w.along(p), down);
     }
 }
 
