@@ -1276,6 +1276,93 @@ mod tests {
         assert_eq!(kept, [-9.0, -5.0, -4.89, -4.0, 4.95, 9.0]);
     }
 
+    /// A ring whose mid curve has two points 3e-5 mm apart near a corner
+    /// (found-78b8f12bc8bf0892): the plain zip fans them from a node far
+    /// along the wall, a sliver; the ring's middle chain meets them square.
+    /// Either way the ring is one strip: its open edges are exactly the two
+    /// chains and the two ends, each once.
+    #[test]
+    fn a_ring_with_close_mid_points_takes_a_middle_chain() {
+        let mut xs: Vec<f64> = (0..=50).map(|k| -10.2 + 0.4 * k as f64).collect();
+        xs.extend([10.16159, 10.16162, 10.1995]);
+        xs.sort_by(f64::total_cmp);
+        xs.dedup();
+        let outer: Vec<DVec3> = xs
+            .iter()
+            .map(|&x| DVec3::new(x, -1.0, -2.5 + 0.01 * (3.0 * x).sin()))
+            .collect();
+        let inner: Vec<DVec3> = (0..=11)
+            .map(|k| DVec3::new(-8.6 + 1.6 * k as f64, -0.46, -2.55))
+            .collect();
+        let along = |p: DVec3| p.x;
+        let thinnest = |ts: &[[DVec3; 3]]| {
+            ts.iter()
+                .map(|&t| triangle_altitude(t))
+                .fold(f64::INFINITY, f64::min)
+        };
+        assert!(thinnest(&zipped(&outer, &inner, &along, true)) < MIN_ALTITUDE_MM);
+        let mut b = SolidBuilder::default();
+        ring_strip(&mut b, &outer, &inner, along, DVec3::NEG_Z);
+        let triangles: Vec<[DVec3; 3]> = b
+            .mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| b.mesh.positions[v as usize]))
+            .collect();
+        // the short edge is 3.05e-5 mm: no triangle on it can be thicker
+        let shortest = outer
+            .windows(2)
+            .map(|w| w[0].distance(w[1]))
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            thinnest(&triangles) >= 0.9 * shortest,
+            "{} against an edge of {shortest}",
+            thinnest(&triangles)
+        );
+        assert!(triangles
+            .iter()
+            .all(|t| (t[1] - t[0]).cross(t[2] - t[0]).z < 0.0));
+        let mut open: HashMap<(u32, u32), i32> = HashMap::new();
+        for t in &b.mesh.triangles {
+            for k in 0..3 {
+                let (p, q) = (t[k], t[(k + 1) % 3]);
+                *open.entry((p.min(q), p.max(q))).or_default() += 1;
+            }
+        }
+        let open: Vec<(u32, u32)> = open
+            .into_iter()
+            .filter(|&(_, n)| n == 1)
+            .map(|(e, _)| e)
+            .collect();
+        assert_eq!(open.len(), outer.len() - 1 + inner.len() - 1 + 2);
+        let index = |p: DVec3| {
+            let p = crate::boolean::f32_exact(p);
+            b.mesh.positions.iter().position(|&q| q == p).unwrap() as u32
+        };
+        for chain in [&outer, &inner] {
+            for pair in chain.windows(2) {
+                let (p, q) = (index(pair[0]), index(pair[1]));
+                assert!(open.contains(&(p.min(q), p.max(q))), "{pair:?}");
+            }
+        }
+    }
+
+    /// A ring without slivers is the plain zip, triangle for triangle.
+    #[test]
+    fn a_ring_without_slivers_is_the_plain_zip() {
+        let outer: Vec<DVec3> = (0..=51)
+            .map(|k| DVec3::new(-10.2 + 0.4 * k as f64, -1.0, -2.5))
+            .collect();
+        let inner: Vec<DVec3> = (0..=11)
+            .map(|k| DVec3::new(-8.6 + 1.6 * k as f64, -0.46, -2.55))
+            .collect();
+        let (mut ring, mut plain) = (SolidBuilder::default(), SolidBuilder::default());
+        ring_strip(&mut ring, &outer, &inner, |p| p.x, DVec3::NEG_Z);
+        zip_strip(&mut plain, &outer, &inner, |p| p.x, DVec3::NEG_Z);
+        assert_eq!(ring.mesh.triangles, plain.mesh.triangles);
+        assert_eq!(ring.mesh.positions, plain.mesh.positions);
+    }
+
     /// A key bump on a corner square, closed below by a 1 mm box: a closed
     /// solid of genus 0 whose volume is the box's plus the frustum's part
     /// above the square (the frustum of two similar polygons:
