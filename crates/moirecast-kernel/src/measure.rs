@@ -161,12 +161,12 @@ const REPROJECTION_STARTS: [f64; 3] = [0.5, 0.0, 1.0];
 
 /// Distance (mm) from every `stride`-th vertex to its exact lens surface,
 /// found afresh: solve the lens parameters (t, v) whose point has the
-/// vertex's x and y, and measure the gap along the lens's normal there. Each solve starts at a point across
-/// the lens (`REPROJECTION_STARTS`) at the station whose point there has
-/// the vertex's y, so that on a steep lens it finds a point of the lens
-/// itself, not one of the arc's circle continued past a crease; a solution
-/// off the lens (t outside [0, 1]) does not count, and a vertex with no
-/// solution on its lens fails.
+/// vertex's x and y, and measure the gap along the lens's normal there.
+/// Each solve starts at a point across the lens (`REPROJECTION_STARTS`) at
+/// the station whose point there has the vertex's y, so that on a steep
+/// lens it finds a point of the lens itself, not one of the arc's circle
+/// continued past a crease; a solution off the lens (t outside [0, 1])
+/// does not count, and a vertex with no solution on its lens fails.
 pub fn vertex_on_surface(design: &Design, dm: &DeviceMesh, stride: usize) -> CheckResult {
     let worst = (0..dm.mesh.positions.len())
         .into_par_iter()
@@ -176,7 +176,7 @@ pub fn vertex_on_surface(design: &Design, dm: &DeviceMesh, stride: usize) -> Che
             let lens = lens_of(design, &dm.origins[vi]);
             let mut dist = f64::INFINITY;
             for t0 in REPROJECTION_STARTS {
-                dist = dist.min(vertical_gap(design, lens, p, t0));
+                dist = dist.min(normal_gap(design, lens, p, t0));
                 if dist <= VERTEX_ON_SURFACE_MM {
                     break;
                 }
@@ -217,14 +217,10 @@ const VERTEX_ON_SURFACE_MM: f64 = 1e-9;
 /// lens point with p's x and y, solved from `t0` across the lens; infinite
 /// when the solve fails or lands off the lens. The normal, not z: where the
 /// lens is nearly vertical, a round-off step in x or y is a large step in z.
-fn vertical_gap(design: &Design, lens: LensRef, p: DVec3, t0: f64) -> f64 {
-    let station = crate::solve::newton_1d(p.y, &String::new, |v| {
-        design
-            .lens_point(lens, t0, v)
-            .map(|s| s.y - p.y)
-            .unwrap_or(f64::NAN)
-    })
-    .unwrap_or(p.y);
+fn normal_gap(design: &Design, lens: LensRef, p: DVec3, t0: f64) -> f64 {
+    let station = design
+        .solve_station_for_y(lens, t0, p.y, p.y)
+        .unwrap_or(p.y);
     let solved = newton_2d(DVec2::new(t0, station), &|| String::new(), |q| {
         design
             .lens_point(lens, q.x, q.y)
@@ -249,7 +245,7 @@ fn vertical_gap(design: &Design, lens: LensRef, p: DVec3, t0: f64) -> f64 {
 }
 
 /// Parameter step of the central differences that give a lens's normal in
-/// `vertical_gap`; the normal only projects a gap of round-off size, so its
+/// `normal_gap`; the normal only projects a gap of round-off size, so its
 /// own error of order step² does not matter.
 const NORMAL_STEP: f64 = 1e-5;
 

@@ -631,26 +631,26 @@ const TOP_EDGE_SPACING_MM: f64 = 0.1;
 /// each point [`TOP_EDGE_SPACING_MM`] past the last one kept and short of
 /// the far end by as much.
 fn top_edge(border: &[DVec3], along: impl Fn(DVec3) -> f64, top_z: f64) -> Vec<DVec3> {
-    thinned(border, along, TOP_EDGE_SPACING_MM)
-        .into_iter()
-        .map(|p| DVec3::new(p.x, p.y, top_z))
-        .collect()
-}
-
-/// The points of `chain` (increasing `along`) kept at `spacing`: both ends,
-/// and between them each point `spacing` past the last one kept and short
-/// of the far end by as much.
-fn thinned(chain: &[DVec3], along: impl Fn(DVec3) -> f64, spacing: f64) -> Vec<DVec3> {
-    let (first, last) = (chain[0], chain[chain.len() - 1]);
+    let (first, last) = (border[0], border[border.len() - 1]);
     let mut kept = vec![first];
-    for &p in &chain[1..chain.len() - 1] {
+    for &p in &border[1..border.len() - 1] {
         let since = along(p) - along(kept[kept.len() - 1]);
-        if since >= spacing && along(last) - along(p) >= spacing {
+        if since >= TOP_EDGE_SPACING_MM && along(last) - along(p) >= TOP_EDGE_SPACING_MM {
             kept.push(p);
         }
     }
     kept.push(last);
-    kept
+    kept.into_iter()
+        .map(|p| DVec3::new(p.x, p.y, top_z))
+        .collect()
+}
+
+/// The smallest altitude of `triangles` (infinite for none).
+fn thinnest(triangles: &[[DVec3; 3]]) -> f64 {
+    triangles
+        .iter()
+        .map(|&t| triangle_altitude(t))
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// How far into the ring, as a share of the distance from a wall's mid
@@ -676,11 +676,6 @@ fn ring_strip(
     along: impl Fn(DVec3) -> f64,
     down: DVec3,
 ) {
-    let thinnest = |ts: &[[DVec3; 3]]| {
-        ts.iter()
-            .map(|&t| triangle_altitude(t))
-            .fold(f64::INFINITY, f64::min)
-    };
     let mut triangles = zipped(outer, inner, &along, true);
     if thinnest(&triangles) < CORNER_SLIVER_MM {
         let middle = middle_chain(outer, inner, &along);
@@ -1156,11 +1151,6 @@ fn corner_fan(
         }
     };
     let ([c, p], [_, q]) = (near(&outer[wa], end_a), near(&outer[wb], end_b));
-    let thinnest = |ts: &[[DVec3; 3]]| {
-        ts.iter()
-            .map(|&t| triangle_altitude(t))
-            .fold(f64::INFINITY, f64::min)
-    };
     let zipped = thinnest(&[[p, c, n], [q, c, n]]);
     if zipped >= CORNER_SLIVER_MM
         || outer[wa].len() < 3
@@ -1295,11 +1285,6 @@ mod tests {
             .map(|k| DVec3::new(-8.6 + 1.6 * k as f64, -0.46, -2.55))
             .collect();
         let along = |p: DVec3| p.x;
-        let thinnest = |ts: &[[DVec3; 3]]| {
-            ts.iter()
-                .map(|&t| triangle_altitude(t))
-                .fold(f64::INFINITY, f64::min)
-        };
         assert!(thinnest(&zipped(&outer, &inner, &along, true)) < MIN_ALTITUDE_MM);
         let mut b = SolidBuilder::default();
         ring_strip(&mut b, &outer, &inner, along, DVec3::NEG_Z);
