@@ -8,7 +8,7 @@ use crate::lens::ArcRule;
 use crate::profile::Profile;
 use crate::surface::PitchSurface;
 use crate::tolerance::Tolerance;
-use glam::DVec2;
+use glam::{DVec2, DVec3};
 
 /// How revealer lens radii are chosen (METHOD §2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -899,44 +899,114 @@ impl Design {
     }
 
     /// Base lenses leaning over themselves. A crease slanted in xy (the
-    /// shift changing along v: dx/dv = s = A·T·∂e/∂v / (1 − A·T·∂e/∂u))
-    /// under a normal that leans in y moves the lens's flanks, bulging
-    /// along −n, in y against its slant: the lens overhangs itself once
-    /// |s·n_y|·tan(β/2) reaches 1 (β the base lenses' AFOV), and the device
-    /// is no longer a graph over xy (found-94ef9d50cd986eb0: a plane
-    /// sloping 53° along y, 6 levels of a gray image). Held below
-    /// [`limits::MAX_SHIFT_SLOPE`] like the slope along u.
+    /// shift changing along v: du/dv = s = A·T·∂e/∂v / (1 − A·T·∂e/∂u))
+    /// turns each base lens's flanks: along the crease the flank runs
+    /// along s_v + s·s_u instead of s_v, while across it the arc leaves
+    /// its chord at β/2 towards −n (β the base lenses' AFOV). Where the
+    /// base surface slopes too, the flank steepens past slope + β/2 and
+    /// can overhang: found-94ef9d50cd986eb0 (a plane sloping 53° along y,
+    /// 6 levels of a gray image) and found-567ae25e16016c83 (a plane
+    /// sloping 39°, mostly along x, under a bump: flanks of 92°). The
+    /// flank's exact normal, from those two tangents, must stay within
+    /// [`limits::MAX_FLANK_DEG`] of vertical, like every other flank.
     fn validate_leaning_lenses(&self, a_t: f64) -> Result<(), DesignError> {
-        let tan_half = match self.base_rule {
-            ArcRule::ConstantAfov { half_angle } => half_angle.tan(),
-            ArcRule::EqualRadius { .. } => return Ok(()),
+        let half_afov = match (self.params.base.kind, self.base_rule) {
+            (BaseKind::DualLens, ArcRule::ConstantAfov { half_angle }) => half_angle,
+            (BaseKind::DualLens, ArcRule::EqualRadius { .. }) => return Ok(()),
+            (BaseKind::Printed(_), _) => 0.0,
         };
-        let worst = self
+        let frames: Vec<LeanFrame> = self
             .grid(LEAN_GRID_CELLS)
             .map(|q| {
+                let (s_u, s_v) = self.base_tangents(q.x, q.y);
                 let (_, grad) = self.params.profile.value_grad(q.x, q.y);
-                let slant = a_t * grad.y / (1.0 - a_t * grad.x).max(1.0 - limits::MAX_SHIFT_SLOPE);
-                (
-                    (slant * self.surface().normal(q.x, q.y).y).abs() * tan_half,
-                    q,
-                )
+                LeanFrame {
+                    at: q,
+                    s_u,
+                    s_v,
+                    grad,
+                }
             })
-            .fold((0.0f64, DVec2::ZERO), |a, b| if b.0 > a.0 { b } else { a });
-        if worst.0 >= limits::MAX_SHIFT_SLOPE {
-            let max_levels = self.params.base.levels * limits::MAX_SHIFT_SLOPE / worst.0;
+            .collect();
+        let steepest = |scale: f64| {
+            frames
+                .iter()
+                .map(|f| (f.flank(scale * a_t, half_afov), f.at))
+                .fold((0.0f64, DVec2::ZERO), |a, b| {
+                    if b.0 > a.0 || b.0.is_nan() {
+                        b
+                    } else {
+                        a
+                    }
+                })
+        };
+        let (flank, at) = steepest(1.0);
+        let limit = limits::MAX_FLANK_DEG.to_radians();
+        if flank.is_nan() || flank > limit {
+            // the largest share of the levels that keeps every flank in
+            // the limit (the flanks steepen with the slant, and it with A),
+            // less 1 %: the grid moves with the margin, which grows with A
+            let (mut ok, mut bad) = (0.0, 1.0);
+            for _ in 0..LEAN_BISECTIONS {
+                let mid = 0.5 * (ok + bad);
+                if steepest(mid).0 <= limit {
+                    ok = mid;
+                } else {
+                    bad = mid;
+                }
+            }
             return Err(err(
                 Param::Levels,
                 self.params.base.levels,
                 format!(
-                    "the base lenses lean over themselves: their creases slant across the layout (the elevation changes along v) under a surface that slopes along y, |s·n_y|·tan(β/2) = {:.3} at layout ({:.1}, {:.1}) mm; it must stay below {}, or the device is no graph over xy",
-                    worst.0, worst.1.x, worst.1.y, limits::MAX_SHIFT_SLOPE
+                    "the base lenses lean over themselves: their creases slant across the layout (the elevation changes along v) on a sloping surface, and at layout ({:.1}, {:.1}) mm their flanks reach {:.1}°, over the {}° limit (the device must stay a graph over xy)",
+                    at.x,
+                    at.y,
+                    flank.to_degrees(),
+                    limits::MAX_FLANK_DEG
                 ),
-                format!("use levels ≤ {max_levels:.3}, more profile blur, or a surface that slopes less along y"),
+                format!(
+                    "use levels ≤ {:.3}, more profile blur, or a surface that slopes less",
+                    (0.99e3 * ok * self.params.base.levels).floor() / 1e3
+                ),
             ));
         }
         Ok(())
     }
 }
+
+/// The base surface's frame and the elevation's gradient at one point of
+/// [`Design::validate_leaning_lenses`]' grid.
+struct LeanFrame {
+    at: DVec2,
+    s_u: DVec3,
+    s_v: DVec3,
+    grad: DVec2,
+}
+
+impl LeanFrame {
+    /// The steeper of the two flanks of a base lens here, as an angle from
+    /// horizontal (over 90°: it overhangs), for shift amplitude `a_t` (mm)
+    /// and base half-AFOV `half_afov`.
+    fn flank(&self, a_t: f64, half_afov: f64) -> f64 {
+        let slant =
+            a_t * self.grad.y / (1.0 - a_t * self.grad.x).max(1.0 - limits::MAX_SHIFT_SLOPE);
+        let n = self.s_u.cross(self.s_v).normalize();
+        let across = self.s_u.normalize();
+        let along = self.s_v + slant * self.s_u;
+        let (sin, cos) = half_afov.sin_cos();
+        [1.0, -1.0]
+            .map(|side| {
+                let flank_normal = (cos * across - side * sin * n).cross(along).normalize();
+                flank_normal.z.clamp(-1.0, 1.0).acos()
+            })
+            .into_iter()
+            .fold(0.0f64, |a, b| if b > a || b.is_nan() { b } else { a })
+    }
+}
+
+/// Halvings of the levels' share in the fix [`Design::validate_leaning_lenses`] suggests.
+const LEAN_BISECTIONS: usize = 30;
 
 /// Cells per side of the grid [`Design::validate_leaning_lenses`] samples.
 const LEAN_GRID_CELLS: usize = 128;

@@ -56,10 +56,17 @@ impl Design {
     /// s_u = f_u − δ_u n − δ n_u (likewise in v), with n_u from the second
     /// derivatives of f. An offset surface (a = 0) shares f's normal exactly.
     pub fn base_normal(&self, u: f64, v: f64) -> DVec3 {
-        let surface = self.surface();
         if self.params.base.a == 0.0 {
-            return surface.normal(u, v);
+            return self.surface().normal(u, v);
         }
+        let (s_u, s_v) = self.base_tangents(u, v);
+        s_u.cross(s_v).normalize()
+    }
+
+    /// The tangents (s_u, s_v) of the base surface s, from analytic
+    /// derivatives as in [`Design::base_normal`].
+    pub fn base_tangents(&self, u: f64, v: f64) -> (DVec3, DVec3) {
+        let surface = self.surface();
         let jet = surface.jet(u, v);
         let big_n = jet.du.cross(jet.dv);
         let len = big_n.length();
@@ -83,7 +90,7 @@ impl Design {
         let (delta_u, delta_v) = (a * focal * lambda_u, a * focal * lambda_v);
         let s_u = jet.du - delta_u * n - delta * n_u;
         let s_v = jet.dv - delta_v * n - delta * n_v;
-        s_u.cross(s_v).normalize()
+        (s_u, s_v)
     }
 
     /// Base shift E(u, v) = A·T·e(u, v) (mm).
