@@ -1031,4 +1031,57 @@ mod tests {
         assert!((s.sag - (std::f64::consts::FRAC_1_SQRT_2 - 0.5)).abs() < 1e-15);
         assert!((s.focal_length - 3.0 * std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-14);
     }
+
+    /// On a flat base a crease slanting by s turns the flank's tangent
+    /// along it to (s, 1, 0), so tan(flank) = tan(β/2)·√(1 + s²) by hand;
+    /// on a base sloping along u without slant it is slope + β/2 exactly.
+    #[test]
+    fn a_leaning_flank_by_hand() {
+        let half = 40f64.to_radians();
+        let flat = |grad: DVec2| LeanFrame {
+            at: DVec2::ZERO,
+            s_u: DVec3::X,
+            s_v: DVec3::Y,
+            grad,
+        };
+        for s in [0.0f64, 0.5, 2.0, -3.0] {
+            let expected = (half.tan() * (1.0 + s * s).sqrt()).atan();
+            // a_t = 0.5 mm, ∂e/∂v = 2s, ∂e/∂u = 0: slant s
+            let got = flat(DVec2::new(0.0, 2.0 * s)).flank(0.5, half);
+            assert!(
+                (got - expected).abs() < 1e-12,
+                "s = {s}: {got} vs {expected}"
+            );
+        }
+        // a plane sloping 30° along u, no slant: 30° + 40°
+        let slope = 30f64.to_radians();
+        let tilted = LeanFrame {
+            at: DVec2::ZERO,
+            s_u: DVec3::new(slope.cos(), 0.0, slope.sin()),
+            s_v: DVec3::Y,
+            grad: DVec2::ZERO,
+        };
+        assert!((tilted.flank(0.5, half) - 70f64.to_radians()).abs() < 1e-12);
+        // a slant turns a flank about the crease's normal plane, so over a
+        // slope along u alone it never overhangs; over a plane sloping along
+        // v too it does (found-567ae25e16016c83: z = −0.688x + 0.403y, β/2 =
+        // 41.3°, slant 2: one flank passes vertical)
+        assert!(
+            LeanFrame {
+                grad: DVec2::new(0.0, 4.0),
+                ..tilted
+            }
+            .flank(0.5, half)
+                < 80f64.to_radians()
+        );
+        let two_way = |grad: DVec2| LeanFrame {
+            at: DVec2::ZERO,
+            s_u: DVec3::new(1.0, 0.0, -0.688195),
+            s_v: DVec3::new(0.0, 1.0, 0.403014),
+            grad,
+        };
+        let half = 41.314931f64.to_radians();
+        assert!(two_way(DVec2::ZERO).flank(0.5, half) < 80f64.to_radians());
+        assert!(two_way(DVec2::new(0.0, 4.0)).flank(0.5, half) > 90f64.to_radians());
+    }
 }

@@ -350,3 +350,70 @@ pub fn union_all(what: &str, parts: Vec<Manifold>) -> Result<Manifold> {
         Manifold::batch_boolean(&parts, manifold_rust::types::OpType::Add),
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A double cone over a ring of 3 far points and a chain of 13 points
+    /// 1e-6 mm apart: every short edge of the chain has both apexes in its
+    /// ring, as the column under one vertex of found-c31f74100df48629 had.
+    fn double_cone_with_a_chain() -> Traced {
+        let corner = |deg: f64| DVec3::new(deg.to_radians().cos(), deg.to_radians().sin(), 0.0);
+        let mut ring = vec![corner(0.0), corner(120.0), corner(240.0)];
+        let tangent = DVec3::new(300f64.to_radians().sin(), -300f64.to_radians().cos(), 0.0);
+        ring.extend((0..13).map(|k| corner(300.0) - f64::from(k) * 1e-6 * tangent));
+        let n = ring.len() as u32;
+        let (top, bottom) = (n, n + 1);
+        let mut positions = ring;
+        positions.extend([DVec3::Z, -DVec3::Z]);
+        let triangles: Vec<[u32; 3]> = (0..n)
+            .flat_map(|i| [[top, i, (i + 1) % n], [bottom, (i + 1) % n, i]])
+            .collect();
+        let source = (0..triangles.len() as u64).map(|k| (0, k)).collect();
+        Traced {
+            mesh: Mesh {
+                positions,
+                triangles,
+            },
+            source,
+        }
+    }
+
+    fn shortest_edge(m: &Mesh) -> f64 {
+        m.triangles
+            .iter()
+            .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+            .map(|(a, b)| m.positions[a as usize].distance(m.positions[b as usize]))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Every directed edge once, and its reverse once: closed and oriented.
+    fn closed_and_oriented(m: &Mesh) -> bool {
+        let mut edges: Vec<(u32, u32)> = m
+            .triangles
+            .iter()
+            .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+            .collect();
+        edges.sort_unstable();
+        let unique = edges.windows(2).all(|w| w[0] != w[1]);
+        unique
+            && edges
+                .iter()
+                .all(|&(a, b)| edges.binary_search(&(b, a)).is_ok())
+    }
+
+    #[test]
+    fn a_chain_of_short_edges_under_one_apex_collapses_whole() {
+        let cone = double_cone_with_a_chain();
+        assert!(closed_and_oriented(&cone.mesh));
+        assert!(shortest_edge(&cone.mesh) < 1e-5);
+        let done = cone.collapse_short_edges(1e-4);
+        assert!(closed_and_oriented(&done.mesh));
+        assert!(shortest_edge(&done.mesh) >= 1e-4);
+        // the chain is one vertex: 3 far ring points, it and the apexes
+        assert_eq!(done.mesh.positions.len(), 6);
+        assert_eq!(done.mesh.triangles.len(), 8);
+        assert_eq!(done.source.len(), 8);
+    }
+}
