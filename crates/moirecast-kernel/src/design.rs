@@ -932,13 +932,10 @@ impl Design {
             frames
                 .iter()
                 .map(|f| (f.flank(scale * a_t, half_afov), f.at))
-                .fold((0.0f64, DVec2::ZERO), |a, b| {
-                    if b.0 > a.0 || b.0.is_nan() {
-                        b
-                    } else {
-                        a
-                    }
-                })
+                .fold(
+                    (0.0f64, DVec2::ZERO),
+                    |a, b| if steeper(b.0, a.0) { b } else { a },
+                )
         };
         let (flank, at) = steepest(1.0);
         let limit = limits::MAX_FLANK_DEG.to_radians();
@@ -1001,8 +998,14 @@ impl LeanFrame {
                 flank_normal.z.clamp(-1.0, 1.0).acos()
             })
             .into_iter()
-            .fold(0.0f64, |a, b| if b > a || b.is_nan() { b } else { a })
+            .fold(0.0f64, |a, b| if steeper(b, a) { b } else { a })
     }
+}
+
+/// Whether flank angle `b` replaces `a` as the steepest: a NaN (a normal
+/// that is not defined) wins and stays, so the rule refuses it.
+fn steeper(b: f64, a: f64) -> bool {
+    b > a || b.is_nan()
 }
 
 /// Halvings of the levels' share in the fix [`Design::validate_leaning_lenses`] suggests.

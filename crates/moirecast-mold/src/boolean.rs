@@ -164,7 +164,8 @@ impl Traced {
                 // touched has the rings it had, so its link test still
                 // holds; the rings may share vertices with earlier ones (a
                 // fan's apex: found-c31f74100df48629, 27 edges of 3–9 nm
-                // in a column under one vent vertex, one collapse a pass).
+                // in a column under one vertex of the cap, one collapse a
+                // pass).
                 if touched[a as usize] || touched[b as usize] {
                     continue;
                 }
