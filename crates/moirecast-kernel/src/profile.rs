@@ -68,6 +68,22 @@ impl Profile {
         }
     }
 
+    /// The longest survey cell (mm) whose second differences still see the
+    /// profile's curvature (see the base survey in the mesher): half its
+    /// detail for a procedural profile; for an image, twice its grid's
+    /// detail (finer than its blur lets it bend), but at most half its
+    /// blur, over which a blurred edge bends as a bump of that σ does
+    /// (found-f27b41facbe9d15f: σ = 0.135 mm at two grid cells, survey
+    /// cells of 0.126 mm saw too little of its creases' curvature, and the
+    /// rows missed the tolerance by 3 %). `None` where [`Self::detail_mm`] is.
+    pub fn coarsest_survey_cell_mm(&self) -> Option<f64> {
+        let detail = self.detail_mm()?;
+        Some(match self {
+            Profile::Sampled(s) => (2.0 * detail).min(0.5 * s.blur),
+            _ => 0.5 * detail,
+        })
+    }
+
     /// e(x, y).
     pub fn value(&self, x: f64, y: f64) -> f64 {
         match self {

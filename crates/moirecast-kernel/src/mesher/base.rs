@@ -63,7 +63,7 @@ pub(super) fn rows(
     let compute_rows = |ys: &[f64]| -> Result<Vec<BaseRow>> {
         ys.par_iter()
             .map(|&y| {
-                let row = base_row(d, base_columns, y, xl, xr);
+                let row = base_row(d, base_columns, y, (xl, xr), &BTreeMap::new());
                 progress.tick(1);
                 row
             })
@@ -294,14 +294,26 @@ pub(super) fn strips(
 /// is not known.
 const CUT_SCAN: usize = 16;
 
+/// Base row `r` (a wall row, y = ±H/2) solved again with vertices added
+/// at the lens parameters `extra` (per lens k, sorted), beside its columns.
+pub(super) fn wall_row_with(
+    d: &Design,
+    plan: &MeshPlan,
+    y: f64,
+    extra: &BTreeMap<i64, Vec<f64>>,
+) -> Result<BaseRow> {
+    base_row(d, &plan.base_columns, y, d.outline_x, extra)
+}
+
 /// Computes one base row at exact height y: crease vertices, cut vertices on
-/// the x-walls and interior vertices, each solved onto its exact surface.
+/// the x-walls and interior vertices, each solved onto its exact surface;
+/// per lens k, vertices also at the parameters `extra[k]`.
 fn base_row(
     d: &Design,
     columns: &BTreeMap<i64, usize>,
     y: f64,
-    xl: f64,
-    xr: f64,
+    (xl, xr): (f64, f64),
+    extra: &BTreeMap<i64, Vec<f64>>,
 ) -> Result<BaseRow> {
     let (k0, k1) = d.base_creases;
     let creases = row_creases(d, y)?;
@@ -402,7 +414,9 @@ fn base_row(
             let (p, o, t) = cut(xr, (xr - x0) / (x1 - x0))?;
             (Some((p, o)), t)
         };
-        for (p, o) in lens_interior(d, k, (c0.0, c1.0), cols, y, (t_lo, t_hi), poly.len() == 1)? {
+        let extra = extra.get(&k).map_or(&[][..], |ts| &ts[..]);
+        let only_one = poly.len() == 1;
+        for (p, o) in lens_interior(d, k, (c0.0, c1.0), (cols, extra), y, (t_lo, t_hi), only_one)? {
             poly.push(push(&mut row, p, o));
         }
         match right_cut {
@@ -501,12 +515,13 @@ fn row_creases(d: &Design, y: f64) -> Result<Vec<(f64, DVec3)>> {
 /// The interior vertices of base lens k on the row at height y, left to
 /// right: its columns between the parameters `t_lo` and `t_hi` of its
 /// ends on this row (a crease or a wall cut), whose creases lie at
-/// stations `v0` and `v1`. `only_one`: the lens has a single vertex so far.
+/// stations `v0` and `v1`, and the parameters `extra` strictly between
+/// those ends. `only_one`: the lens has a single vertex so far.
 fn lens_interior(
     d: &Design,
     k: i64,
     (v0, v1): (f64, f64),
-    cols: usize,
+    (cols, extra): (usize, &[f64]),
     y: f64,
     (t_lo, t_hi): (f64, f64),
     only_one: bool,
@@ -538,11 +553,14 @@ fn lens_interior(
         let (an, u0n, u1n) = d.base_section_and_creases(k, vm - hq, (Some(u0m), Some(u1m)))?;
         let (du0, du1) = ((u0p - u0n) / (2.0 * hq), (u1p - u1n) / (2.0 * hq));
         let predict = |v: f64| (Some(u0m + du0 * (v - vm)), Some(u1m + du1 * (v - vm)));
-        for j in 1..cols {
-            let t = j as f64 / cols as f64;
-            if t <= t_lo + margin || t >= t_hi - margin {
-                continue;
-            }
+        let columns = (1..cols)
+            .map(|j| j as f64 / cols as f64)
+            .filter(|&t| t > t_lo + margin && t < t_hi - margin);
+        let mut ts: Vec<f64> = columns
+            .chain(extra.iter().copied().filter(|&t| t > t_lo && t < t_hi))
+            .collect();
+        ts.sort_by(f64::total_cmp);
+        for t in ts {
             let (yn, y0, yp) = (an.point(t).y, am.point(t).y, ap.point(t).y);
             let (jm, km) = ((yp - yn) / (2.0 * hq), (yp - 2.0 * y0 + yn) / (hq * hq));
             let mut dv = (y - y0) / jm;

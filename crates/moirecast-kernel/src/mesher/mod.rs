@@ -31,6 +31,7 @@ use crate::progress::Progress;
 use base::BaseRow;
 use plan::{MeshPlan, ALONG_SHARE};
 use revealer::RevealerRow;
+use std::collections::BTreeMap;
 
 pub use crate::device_mesh::{DeviceMesh, MeshStats, Patch, Side, VertexOrigin};
 
@@ -41,17 +42,36 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
     let mut plan = plan::plan(design, progress)?;
     plan.within_budget(design)?;
     let mut revealer = revealer::vertices(design, &plan, progress)?;
-    let (base_ys, base_rows) = base::rows(design, &plan, progress)?;
+    let (base_ys, mut base_rows) = base::rows(design, &plan, progress)?;
     progress.stage("triangles", 1);
     // Where an x-wall folds (a sparse revealer edge over a steep, wavy
-    // base edge), revealer rows are added there and the top remade.
+    // base edge), revealer rows are added there and the top remade; where
+    // a front or back wall folds (a sparse base edge under the wavy
+    // revealer one), its base row gets vertices there and is solved again.
+    let mut wall_row_extra: BTreeMap<usize, BTreeMap<i64, Vec<f64>>> = BTreeMap::new();
     for pass in 0.. {
         let (mut dm, base_offsets) = with_vertices(design, &plan, &revealer, &base_rows);
         let wall_part = walls::strips(&dm, &base_rows, &base_offsets);
         let folds = walls::folds(&dm, &wall_part);
-        if !folds.is_empty() && pass < MAX_FOLD_PASSES {
-            plan.add_revealer_rows(&folds, design.half_height);
-            revealer = revealer::vertices(design, &plan, &crate::progress::Silent)?;
+        let under_creases = walls::base_vertices_under_creases(
+            &dm,
+            (&base_rows, &base_offsets),
+            &walls::sparse_bottoms(&dm, &wall_part),
+            0.25 * design.params.period,
+        );
+        if (!folds.is_empty() || !under_creases.is_empty()) && pass < MAX_FOLD_PASSES {
+            if !folds.is_empty() {
+                plan.add_revealer_rows(&folds, design.half_height);
+                revealer = revealer::vertices(design, &plan, &crate::progress::Silent)?;
+            }
+            for (r, k, t) in under_creases {
+                let ts = wall_row_extra.entry(r).or_default().entry(k).or_default();
+                ts.push(t);
+                ts.sort_by(f64::total_cmp);
+            }
+            for (&r, extra) in &wall_row_extra {
+                base_rows[r] = base::wall_row_with(design, &plan, base_ys[r], extra)?;
+            }
             continue;
         }
         let revealer_parts = revealer::strips(&dm);
@@ -85,8 +105,8 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
     unreachable!("the passes end")
 }
 
-/// Times revealer rows are added where a wall folds before the mesh is
-/// left to the `walls-face-out` check.
+/// Times revealer rows or base wall-row vertices are added where a wall
+/// folds before the mesh is left to the `walls-face-out` check.
 const MAX_FOLD_PASSES: usize = 8;
 
 /// The mesh's vertices, revealer rows first, then the base rows; and the

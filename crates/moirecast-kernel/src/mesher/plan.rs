@@ -6,7 +6,6 @@
 use crate::design::Design;
 use crate::error::Result;
 use crate::model::BaseSection;
-use crate::profile::Profile;
 use crate::progress::Progress;
 use crate::solve::bracketed_secant;
 use crate::tolerance::WALL_SNAP_MM;
@@ -344,10 +343,9 @@ impl<'a> Planner<'a> {
     /// Cells of the base's survey: [`SURVEY_CELLS`] (more over a long layout,
     /// see [`Self::cells_over`]), or as many as it takes
     /// for a cell to be a quarter of the profile's detail where the usual
-    /// cells are coarser than the survey can follow, so the base creases'
-    /// curvature along y is seen: more than twice the detail for a sampled
-    /// image (its detail is its grid's, finer than its blur lets it bend),
-    /// more than half of it for a procedural profile. A second difference
+    /// cells are coarser than the survey can follow
+    /// ([`crate::profile::Profile::coarsest_survey_cell_mm`]), so the base creases'
+    /// curvature along y is seen. A second difference
     /// over cells of a ring's wavelength / 2.65 sees 61 % of the crease's
     /// curvature, and the rows it places missed the tolerance by 62 %
     /// (found-2576c6b693dacdf6); over λ / 8, 95 %.
@@ -362,12 +360,8 @@ impl<'a> Planner<'a> {
         let usual = ((over_layout as f64 * (hh + pad) / (hh + pad.min(hh))).ceil() as usize)
             .clamp(SURVEY_CELLS, MAX_SURVEY_CELLS);
         let profile = &self.design.params.profile;
-        let coarsest = |detail: f64| match profile {
-            Profile::Sampled(_) => 2.0 * detail,
-            _ => 0.5 * detail,
-        };
-        match profile.detail_mm() {
-            Some(detail) if length / usual as f64 > coarsest(detail) => {
+        match (profile.detail_mm(), profile.coarsest_survey_cell_mm()) {
+            (Some(detail), Some(coarsest)) if length / usual as f64 > coarsest => {
                 ((4.0 * length / detail).ceil() as usize).clamp(usual, MAX_SURVEY_CELLS)
             }
             _ => usual,

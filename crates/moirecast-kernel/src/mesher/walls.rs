@@ -6,6 +6,7 @@ use super::base::BaseRow;
 use super::zip::{zip, Strip};
 use crate::check::{triangle_altitude, MIN_ALTITUDE_MM};
 use crate::device_mesh::{DeviceMesh, Patch, Side};
+use crate::model::LensRef;
 use glam::DVec3;
 
 /// The walls' triangles, in the order left, right, front, back.
@@ -85,6 +86,39 @@ pub(super) fn strips(dm: &DeviceMesh, base_rows: &[BaseRow], base_offsets: &[u32
     (tris, patches)
 }
 
+/// The wall triangles that fold or are slivers: each one's side, with
+/// its corners split into those on the revealer (top) and on the base.
+/// A triangle folds when its normal points into the device, and is a
+/// sliver when it is thinner than the degenerate-triangle check allows.
+fn defects<'a>(
+    dm: &'a DeviceMesh,
+    (tris, patches): &'a Strip,
+) -> impl Iterator<Item = (Side, Vec<DVec3>, Vec<DVec3>)> + 'a {
+    let pos = &dm.mesh.positions;
+    tris.iter().zip(patches).filter_map(move |(t, patch)| {
+        let Patch::Wall(side) = *patch else {
+            return None;
+        };
+        let outward = match side {
+            Side::Left => DVec3::NEG_X,
+            Side::Right => DVec3::X,
+            Side::Front => DVec3::NEG_Y,
+            Side::Back => DVec3::Y,
+        };
+        let corners = t.map(|v| pos[v as usize]);
+        let [a, b, c] = corners;
+        let faces_out = (b - a).cross(c - a).dot(outward) > 0.0;
+        if faces_out && triangle_altitude(corners) >= MIN_ALTITUDE_MM {
+            return None;
+        }
+        let (top, bottom): (Vec<u32>, Vec<u32>) = t
+            .iter()
+            .partition(|&&v| dm.origins[v as usize].is_revealer());
+        let at = |vs: Vec<u32>| vs.into_iter().map(|v| pos[v as usize]).collect();
+        Some((side, at(top), at(bottom)))
+    })
+}
+
 /// Where the x-walls fold or fan into slivers: for every triangle of the
 /// left or right wall whose normal points into the device, or that is
 /// thinner than the degenerate-triangle check allows, the height y of its
@@ -93,28 +127,80 @@ pub(super) fn strips(dm: &DeviceMesh, base_rows: &[BaseRow], base_offsets: &[u32
 /// that face out, and fan two bottom vertices a few tens of nanometres
 /// apart (a crease grazing the wall) from a vertex above them rather than
 /// from one millimetres away (found-9e054658bb6abd84: 8.7 nm).
-pub(super) fn folds(dm: &DeviceMesh, (tris, patches): &Strip) -> Vec<f64> {
+pub(super) fn folds(dm: &DeviceMesh, strip: &Strip) -> Vec<f64> {
+    defects(dm, strip)
+        .filter(|(side, ..)| matches!(side, Side::Left | Side::Right))
+        .map(|(_, _, bottom)| bottom.iter().map(|p| p.y).sum::<f64>() / bottom.len().max(1) as f64)
+        .collect()
+}
+
+/// The mirror of [`folds`] for the front and back walls, whose *bottom*
+/// edge can be the sparse one: a printed base's flat band, or a base lens
+/// stretched where the profile's slope nearly cancels the period, leaves
+/// the wall's base row without a vertex for tens of millimetres, and the
+/// zip fans the revealer's wavy edge from its far end, folded
+/// (found-9b9a24a4: 13 lenses fanned from a corner 32 mm away). For
+/// every such triangle, its side and the x where the base edge needs a
+/// vertex: under its revealer edge, or between its two base vertices.
+pub(super) fn sparse_bottoms(dm: &DeviceMesh, strip: &Strip) -> Vec<(Side, f64)> {
+    defects(dm, strip)
+        .filter(|(side, ..)| matches!(side, Side::Front | Side::Back))
+        .map(|(side, top, bottom)| {
+            let edge = if top.len() == 2 { top } else { bottom };
+            (
+                side,
+                edge.iter().map(|p| p.x).sum::<f64>() / edge.len() as f64,
+            )
+        })
+        .collect()
+}
+
+/// Lens parameters to add to the base's wall rows where the front or back
+/// wall's base edge is sparse (`sparse`, from [`sparse_bottoms`]): on the
+/// base edge's segment under each place, one vertex under every revealer
+/// crease of that wall's top edge, farther than `gap` (mm) from the
+/// segment's ends. Below a crease, every triangle fanned over the convex
+/// lens arcs on either side faces out. Returned as (base row, base lens k,
+/// parameter t), t interpolated along the segment; the vertex is then
+/// solved onto the lens at that t, exactly.
+pub(super) fn base_vertices_under_creases(
+    dm: &DeviceMesh,
+    (base_rows, base_offsets): (&[BaseRow], &[u32]),
+    sparse: &[(Side, f64)],
+    gap: f64,
+) -> Vec<(usize, i64, f64)> {
     let pos = &dm.mesh.positions;
-    let top = |v: u32| dm.origins[v as usize].is_revealer();
-    let mut ys = Vec::new();
-    for (t, patch) in tris.iter().zip(patches) {
-        let outward = match patch {
-            Patch::Wall(Side::Left) => DVec3::NEG_X,
-            Patch::Wall(Side::Right) => DVec3::X,
-            _ => continue,
+    let last_row = dm.revealer_rows.len() - 1;
+    let mut added = Vec::new();
+    for &(side, x) in sparse {
+        let (r, top_row) = match side {
+            Side::Front => (0, 0),
+            _ => (base_rows.len() - 1, last_row),
         };
-        let corners = t.map(|v| pos[v as usize]);
-        let [a, b, c] = corners;
-        let faces_out = (b - a).cross(c - a).dot(outward) > 0.0;
-        if faces_out && triangle_altitude(corners) >= MIN_ALTITUDE_MM {
+        let row = &base_rows[r];
+        let at = |i: u32| (i + base_offsets[r]) as usize;
+        let segment = row.lenses.iter().find_map(|(&k, poly)| {
+            poly.windows(2).find_map(|w| {
+                let (xa, xb) = (pos[at(w[0])].x, pos[at(w[1])].x);
+                (xa <= x && x <= xb).then_some((k, w[0], w[1], xa, xb))
+            })
+        });
+        let Some((k, ia, ib, xa, xb)) = segment else {
             continue;
+        };
+        let lens = LensRef::Base(k);
+        let t = |i: u32| dm.origins[at(i)].params_on(lens).map(|p| p.x);
+        let (Some(ta), Some(tb)) = (t(ia), t(ib)) else {
+            continue;
+        };
+        for lens_i in 0..dm.revealer_columns.len() {
+            let xc = pos[dm.revealer_vertex(top_row, lens_i, 0) as usize].x;
+            if xc > xa + gap && xc < xb - gap {
+                added.push((r, k, ta + (xc - xa) / (xb - xa) * (tb - ta)));
+            }
         }
-        let bottom: Vec<f64> = t
-            .iter()
-            .filter(|&&v| !top(v))
-            .map(|&v| pos[v as usize].y)
-            .collect();
-        ys.push(bottom.iter().sum::<f64>() / bottom.len().max(1) as f64);
     }
-    ys
+    added.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)).then(a.2.total_cmp(&b.2)));
+    added.dedup_by(|a, b| (a.0, a.1) == (b.0, b.1) && (a.2 - b.2).abs() < 1e-12);
+    added
 }
