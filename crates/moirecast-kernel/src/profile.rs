@@ -71,15 +71,18 @@ impl Profile {
     /// The longest survey cell (mm) whose second differences still see the
     /// profile's curvature (see the base survey in the mesher): half its
     /// detail for a procedural profile; for an image, twice its grid's
-    /// detail (finer than its blur lets it bend), but at most half its
-    /// blur, over which a blurred edge bends as a bump of that σ does
-    /// (found-f27b41facbe9d15f: σ = 0.135 mm at two grid cells, survey
-    /// cells of 0.126 mm saw too little of its creases' curvature, and the
-    /// rows missed the tolerance by 3 %). `None` where [`Self::detail_mm`] is.
+    /// detail (finer than its blur lets it bend), and where the grid
+    /// resolves the blur, at most half the blur, over which a blurred edge
+    /// bends as a bump of that σ does (found-f27b41facbe9d15f: σ = 0.135
+    /// mm at two grid cells, survey cells of 0.126 mm saw too little of its
+    /// creases' curvature, and the rows missed the tolerance by 3 %). A
+    /// blur finer than the grid bends nothing the grid's own detail does
+    /// not. `None` where [`Self::detail_mm`] is.
     pub fn coarsest_survey_cell_mm(&self) -> Option<f64> {
         let detail = self.detail_mm()?;
         Some(match self {
-            Profile::Sampled(s) => (2.0 * detail).min(0.5 * s.blur),
+            Profile::Sampled(s) if s.blur >= 2.0 * s.spacing => (2.0 * detail).min(0.5 * s.blur),
+            Profile::Sampled(_) => 2.0 * detail,
             _ => 0.5 * detail,
         })
     }
