@@ -213,24 +213,36 @@ impl SampledProfile {
         width: f64,
         height: f64,
     ) -> Result<Self, String> {
+        Self::reaching(raster, (mode, invert, blur), (width, height), 0.0)
+    }
+
+    /// [`Self::from_raster`], its grid reaching at least `reach` (mm) past
+    /// the layout on every side: a design's base reads the elevation over
+    /// its margin ([`crate::Design::margin`]), and past the grid the border
+    /// value holds, a kink the base would bend over within a row
+    /// (found-14a20941fd0557ea: a deep base under a 36° slope reading 4.6
+    /// mm past a grid that held 4.8 mm of blur margin, 2.7 times the
+    /// tolerance off).
+    pub fn reaching(
+        raster: &Raster,
+        (mode, invert, blur): (ProfileMode, bool, f64),
+        (width, height): (f64, f64),
+        reach: f64,
+    ) -> Result<Self, String> {
         Self::with_blur_cells(
             raster,
-            mode,
-            invert,
-            blur,
-            (width, height),
+            (mode, invert, blur),
+            (width, height, reach),
             BLUR_CELLS_PER_SIGMA,
         )
     }
 
-    /// [`Self::from_raster`] with at most `cells_per_sigma` grid cells per
+    /// [`Self::reaching`] with at most `cells_per_sigma` grid cells per
     /// blur σ.
     fn with_blur_cells(
         raster: &Raster,
-        mode: ProfileMode,
-        invert: bool,
-        blur: f64,
-        (width, height): (f64, f64),
+        (mode, invert, blur): (ProfileMode, bool, f64),
+        (width, height, reach): (f64, f64, f64),
         cells_per_sigma: f64,
     ) -> Result<Self, String> {
         if raster.width == 0 || raster.height == 0 {
@@ -250,7 +262,7 @@ impl SampledProfile {
         // layout would ask for billions of cells, so the spacing grows
         // until the grid holds at most MAX_PROFILE_CELLS
         let grid = |spacing: f64| {
-            let margin = 3.0 * blur + 4.0 * spacing;
+            let margin = (3.0 * blur + 4.0 * spacing).max(reach + 2.0 * spacing);
             let nx = ((width + 2.0 * margin) / spacing).ceil() as usize + 1;
             let ny = ((height + 2.0 * margin) / spacing).ceil() as usize + 1;
             (margin, nx, ny)
@@ -344,10 +356,25 @@ impl SampledProfile {
         self.spacing
     }
 
+    /// The grid value at node (i, j), the stencil's one node beyond the
+    /// border mirrored about it: the interpolant's slope across the border
+    /// is then 0, as it is beyond, where the border value holds. A clamped
+    /// node left a kink there, which a base reaching past the grid (a deep
+    /// base under a steep slope: found-14a20941fd0557ea, 4.6 mm past the
+    /// layout) bent over within one row: 2.7 times the tolerance.
     fn at(&self, i: isize, j: isize) -> f64 {
-        let i = i.clamp(0, self.nx as isize - 1) as usize;
-        let j = j.clamp(0, self.ny as isize - 1) as usize;
-        self.values[j * self.nx + i]
+        let mirrored = |k: isize, n: usize| {
+            let last = n as isize - 1;
+            let k = if k < 0 {
+                -k
+            } else if k > last {
+                2 * last - k
+            } else {
+                k
+            };
+            k.clamp(0, last) as usize
+        };
+        self.values[mirrored(j, self.ny) * self.nx + mirrored(i, self.nx)]
     }
 
     /// (e, ∇e) at (x, y) by Catmull-Rom interpolation (C¹).
@@ -634,10 +661,8 @@ mod tests {
             let build = |cells| {
                 SampledProfile::with_blur_cells(
                     &raster,
-                    ProfileMode::Gray,
-                    true,
-                    blur,
-                    (40.0, 40.0),
+                    (ProfileMode::Gray, true, blur),
+                    (40.0, 40.0, 0.0),
                     cells,
                 )
                 .unwrap()

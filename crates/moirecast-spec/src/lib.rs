@@ -598,8 +598,7 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         finite(file, "layout.width", layout.width)?,
         finite(file, "layout.height", layout.height)?,
     );
-    let (profile, profile_source) = profile(file, &raw.profile, (w, h), &images)?;
-    let params = DesignParams {
+    let mut params = DesignParams {
         surface,
         width: w,
         height: h,
@@ -619,9 +618,18 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
             levels: finite(file, "base.levels", raw.base.levels)?,
             afov: base_afov,
         },
-        profile,
+        profile: Profile::Flat,
         tolerance: finite(file, "mesh.tolerance", raw.mesh.tolerance)?,
     };
+    // An image's grid must reach as far past the layout as the base reads
+    // it: the design's margin, which the profile does not change. A design
+    // refused here is refused again below, with its profile.
+    let reach = match raw.profile.image {
+        Some(_) => Design::new(params.clone()).map_or(0.0, |d| d.margin),
+        None => 0.0,
+    };
+    let (profile, profile_source) = profile(file, &raw.profile, (w, h, reach), &images)?;
+    params.profile = profile;
     let design = Design::new(params).map_err(|e| from_design_error(file, e))?;
     let mold = raw.mold.params();
     mold.validate().map_err(|e| match e {
@@ -780,7 +788,7 @@ fn base_d(file: &str, d: &Distance) -> Result<Option<f64>, SpecError> {
 fn profile(
     file: &str,
     p: &ProfileTable,
-    (w, h): (f64, f64),
+    (w, h, reach): (f64, f64, f64),
     images: &ImageSource,
 ) -> Result<(Profile, String), SpecError> {
     let blur = finite(file, "profile.blur", p.blur)?;
@@ -872,7 +880,7 @@ fn profile(
                     "give width and height in mm",
                 ));
             }
-            let sampled = SampledProfile::from_raster(&raster, mode, p.invert, blur, w, h)
+            let sampled = SampledProfile::reaching(&raster, (mode, p.invert, blur), (w, h), reach)
                 .map_err(|e| {
                     invalid(
                         file,
