@@ -616,6 +616,34 @@ mod tests {
         }
     }
 
+    /// Past the grid's border the border value holds with no gradient, and
+    /// the interpolant runs into it flat: its slope across the border cell
+    /// falls to 0 at the border (a node clamped there left a kink), and a
+    /// grid asked to reach past the layout does.
+    #[test]
+    fn past_the_grid_the_value_holds_without_a_kink() {
+        let p = SampledProfile::reaching(
+            &disc_raster(64, 20.0),
+            // inverted, the shape is all but the disc: its depth, and e,
+            // still grow at the grid's border
+            (ProfileMode::Shape { threshold: 0.5 }, true, 0.5),
+            (40.0, 30.0),
+            12.0,
+        )
+        .unwrap();
+        let edge = p.origin.y;
+        assert!(edge <= -15.0 - 12.0, "the grid reaches {edge}");
+        let x = 3.0;
+        let (held, g) = p.eval(x, edge - 5.0);
+        assert_eq!(g.y, 0.0);
+        assert_eq!(held, p.eval(x, edge).0);
+        // one-sided slope into the border: shrinking with the distance
+        let slope = |h: f64| (p.eval(x, edge + h).0 - p.eval(x, edge).0) / h;
+        let (near, far) = (slope(1e-4 * p.spacing), slope(p.spacing));
+        assert!(far.abs() > 1e-3, "e is flat at the border: {far}");
+        assert!(near.abs() <= 1e-3 * far.abs(), "{near} against {far}");
+    }
+
     #[test]
     fn gradients_match_finite_differences() {
         let sampled = SampledProfile::from_raster(
