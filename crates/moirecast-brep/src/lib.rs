@@ -21,6 +21,7 @@
 pub mod crosscheck;
 pub mod error;
 pub mod lenses;
+pub mod mold;
 pub mod printed;
 pub mod solid;
 pub mod spline;

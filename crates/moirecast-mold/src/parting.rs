@@ -131,6 +131,8 @@ pub enum Level {
 pub struct PosedDevice {
     pub mesh: Mesh,
     pub faces: Vec<Face>,
+    /// Per triangle, the device mesher's face it is part of.
+    pub patches: Vec<Patch>,
     /// Per vertex.
     pub levels: Vec<Level>,
     /// The outline: the xy bounds of the posed device.
@@ -173,7 +175,8 @@ impl PosedDevice {
                 }),
             })
             .collect();
-        let levels = split_walls(&mut mesh, &mut faces)?;
+        let mut patches = device.patches.clone();
+        let levels = split_walls(&mut mesh, &mut faces, &mut patches)?;
         // The exact outline, posed (vertices lie on it to the wall snap).
         let (a, b) = (
             posed.apply(DVec3::new(ox0, -hh, 0.0)),
@@ -192,6 +195,7 @@ impl PosedDevice {
         Ok(PosedDevice {
             mesh,
             faces,
+            patches,
             levels,
             outline,
             pose: posed,
@@ -207,9 +211,13 @@ impl PosedDevice {
 /// Splits every wall triangle at the midpoints of its two rungs (its edges
 /// from the wall's top edge to its bottom edge): three triangles, wound as
 /// the one they replace. Neighbours share a rung, so the split conforms, and
-/// the midpoints, in order along a wall, are the mid-wall curve. Returns
-/// each vertex's level.
-fn split_walls(mesh: &mut Mesh, faces: &mut Vec<Face>) -> Result<Vec<Level>> {
+/// the midpoints, in order along a wall, are the mid-wall curve. `faces`
+/// and `patches` (per triangle) follow. Returns each vertex's level.
+fn split_walls(
+    mesh: &mut Mesh,
+    faces: &mut Vec<Face>,
+    patches: &mut Vec<Patch>,
+) -> Result<Vec<Level>> {
     let n = mesh.positions.len();
     let (mut on_upper, mut on_lower) = (vec![false; n], vec![false; n]);
     for (t, face) in mesh.triangles.iter().zip(faces.iter()) {
@@ -249,10 +257,12 @@ fn split_walls(mesh: &mut Mesh, faces: &mut Vec<Face>) -> Result<Vec<Level>> {
         })
     };
     let (old_tris, old_faces) = (std::mem::take(&mut mesh.triangles), std::mem::take(faces));
-    for (t, face) in old_tris.into_iter().zip(old_faces) {
+    let old_patches = std::mem::take(patches);
+    for ((t, face), patch) in old_tris.into_iter().zip(old_faces).zip(old_patches) {
         if !matches!(face, Face::Wall(_)) {
             mesh.triangles.push(t);
             faces.push(face);
+            patches.push(patch);
             continue;
         }
         // rotate to (p, q, x): p and q on one edge, x on the other
@@ -272,6 +282,7 @@ fn split_walls(mesh: &mut Mesh, faces: &mut Vec<Face>) -> Result<Vec<Level>> {
         for tri in [[p, q, mq], [p, mq, mp], [mp, mq, x]] {
             mesh.triangles.push(tri);
             faces.push(face);
+            patches.push(patch);
         }
     }
     Ok(levels)
@@ -577,11 +588,42 @@ impl<'a> HeightQuery<'a> {
 }
 
 /// Builds a closed mesh from triangles given with the outward direction they
-/// must face; identical positions share one vertex.
+/// must face; identical positions share one vertex. Every triangle is
+/// labelled with `surface`, the surface it is being built on.
 #[derive(Default)]
 pub struct SolidBuilder {
     pub mesh: Mesh,
     index: HashMap<[u64; 3], u32>,
+    /// The surface the triangles added next lie on.
+    pub surface: RegionSurface,
+    /// Per triangle, the surface it lies on.
+    pub surfaces: Vec<RegionSurface>,
+}
+
+/// The surface a parting region's triangle lies on: what an exact B-rep of
+/// the region makes its faces of.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum RegionSurface {
+    /// One of the device's faces (the region's `device_faces` says which).
+    Device,
+    /// A wall's skirt: its mid curve carried horizontally outward.
+    Skirt(Wall),
+    /// The flat square at a corner of the skirt, counter-clockwise from
+    /// (x min, y min), as [`Skirt::corners`].
+    Corner(usize),
+    /// The side of a registration key's bump standing on corner square k:
+    /// its first half of facets (0) or its second (1), so that an exact
+    /// B-rep's cone and the circles it meets have seams to start from.
+    BumpSide(usize, usize),
+    /// The top of that bump.
+    BumpTop(usize),
+    /// The floor through the device's interior ([`Floor::Grid`]).
+    Grid,
+    /// A side of the block, beyond this wall.
+    Side(Wall),
+    /// The block's top or bottom face.
+    #[default]
+    Cap,
 }
 
 impl SolidBuilder {
@@ -603,6 +645,7 @@ impl SolidBuilder {
         } else {
             self.mesh.triangles.push([ia, ic, ib]);
         }
+        self.surfaces.push(self.surface);
     }
 
     /// A vertex no other call will share: one the caller indexes itself.
@@ -854,7 +897,12 @@ impl Bump {
 /// triangle to the ring vertex facing that side's middle; the foot lies
 /// within the square's inscribed circle (the keys' placement checks that),
 /// so every corner sees its stretch of the ring.
-fn square_with_bump(b: &mut SolidBuilder, square: [DVec3; 4], bump: &Bump, down: DVec3) {
+fn square_with_bump(
+    b: &mut SolidBuilder,
+    (k, square): (usize, [DVec3; 4]),
+    bump: &Bump,
+    down: DVec3,
+) {
     let c = bump.centre;
     let angle = |p: DVec3| (p.y - c.y).atan2(p.x - c.x);
     let mut sq = square;
@@ -873,21 +921,24 @@ fn square_with_bump(b: &mut SolidBuilder, square: [DVec3; 4], bump: &Bump, down:
                 .expect("a ring")
         })
         .collect();
+    b.surface = RegionSurface::Corner(k);
     for i in 0..4 {
         let (corner, next) = (sq[(i + 1) % 4], facing[(i + 1) % 4]);
         b.triangle(sq[i], corner, ring[facing[i]], down);
-        let mut k = facing[i];
-        while k != next {
-            b.triangle(corner, ring[k], ring[(k + 1) % n], down);
-            k = (k + 1) % n;
+        let mut r = facing[i];
+        while r != next {
+            b.triangle(corner, ring[r], ring[(r + 1) % n], down);
+            r = (r + 1) % n;
         }
     }
     let up = DVec3::Z;
-    for k in 0..n {
-        let (p, q) = (ring[k], ring[(k + 1) % n]);
-        let (pt, qt) = (bump.top[k], bump.top[(k + 1) % n]);
+    for j in 0..n {
+        let (p, q) = (ring[j], ring[(j + 1) % n]);
+        let (pt, qt) = (bump.top[j], bump.top[(j + 1) % n]);
         let out = (0.5 * (p + q).truncate() - c).extend(0.0);
+        b.surface = RegionSurface::BumpSide(k, 2 * j / n);
         b.quad(p, q, qt, pt, out);
+        b.surface = RegionSurface::BumpTop(k);
         b.triangle(c.extend(pt.z), pt, qt, up);
     }
 }
@@ -898,6 +949,11 @@ pub struct Region {
     pub mesh: Mesh,
     /// The device triangle each of the region's first triangles is, reversed.
     pub device_faces: Vec<u32>,
+    /// Per triangle, the surface it lies on.
+    pub surfaces: Vec<RegionSurface>,
+    /// Per vertex of a device face, the posed device's vertex it is (the
+    /// others: `u32::MAX`).
+    pub device_vertices: Vec<u32>,
 }
 
 /// The block's part on one side of the parting surface, as a closed solid
@@ -926,12 +982,13 @@ pub fn parting_region(
     let mut b = SolidBuilder::default();
     let skirt = Skirt { walls, footprint };
     // The device's faces first, so that they keep their indices.
-    let device_faces = match &floor {
+    let (device_faces, device_vertices) = match &floor {
         Floor::Device(device) => device_floor(&mut b, device, side),
-        Floor::Grid { .. } => Vec::new(),
+        Floor::Grid { .. } => (Vec::new(), Vec::new()),
     };
     // Skirt strips.
     for w in Wall::ALL {
+        b.surface = RegionSurface::Skirt(w);
         let pts = skirt.on_wall(w);
         for k in 0..pts.len() - 1 {
             let (p, q) = (pts[k], pts[k + 1]);
@@ -942,7 +999,7 @@ pub fn parting_region(
     // A fan around a point off the square's centre: the keys stand in the
     // middle of these squares, and a diagonal would run through two of a
     // key's polygon vertices, leaving slivers in the booleans.
-    for &(c, fx, fy) in &corners {
+    for (k, &(c, fx, fy)) in corners.iter().enumerate() {
         let square = [
             c,
             DVec3::new(fx, c.y, c.z),
@@ -950,9 +1007,10 @@ pub fn parting_region(
             DVec3::new(c.x, fy, c.z),
         ];
         if let Some(bump) = bumps.iter().find(|k| k.in_square(square[0], square[2])) {
-            square_with_bump(&mut b, square, bump, down);
+            square_with_bump(&mut b, (k, square), bump, down);
             continue;
         }
+        b.surface = RegionSurface::Corner(k);
         let hub = DVec3::new(c.x + 0.75 * (fx - c.x), 0.5 * (c.y + fy), c.z);
         for k in 0..4 {
             b.triangle(hub, square[k], square[(k + 1) % 4], down);
@@ -963,6 +1021,7 @@ pub fn parting_region(
         cells,
     } = floor
     {
+        b.surface = RegionSurface::Grid;
         grid_floor(
             &mut b,
             &skirt,
@@ -972,9 +1031,13 @@ pub fn parting_region(
         );
     }
     sides_and_cap(&mut b, &skirt, &corners, cap_z, cap_out);
+    debug_assert_eq!(b.surfaces.len(), b.mesh.triangles.len());
+    let (mesh, surfaces) = (b.mesh, b.surfaces);
     Region {
-        mesh: b.mesh,
+        mesh,
         device_faces,
+        surfaces,
+        device_vertices,
     }
 }
 
@@ -1027,8 +1090,13 @@ impl Skirt<'_> {
 }
 
 /// The device's faces on `side` of the parting line, reversed; returns the
-/// device triangle each added triangle is.
-fn device_floor(b: &mut SolidBuilder, device: &PosedDevice, side: PartSide) -> Vec<u32> {
+/// device triangle each added triangle is, and per vertex added the posed
+/// device's vertex it is.
+fn device_floor(
+    b: &mut SolidBuilder,
+    device: &PosedDevice,
+    side: PartSide,
+) -> (Vec<u32>, Vec<u32>) {
     let mut device_faces = Vec::new();
     let level = match side {
         PartSide::Above => Level::Upper,
@@ -1053,9 +1121,16 @@ fn device_floor(b: &mut SolidBuilder, device: &PosedDevice, side: PartSide) -> V
             index[v]
         });
         b.mesh.triangles.push([p, r, q]);
+        b.surfaces.push(RegionSurface::Device);
         device_faces.push(k as u32);
     }
-    device_faces
+    let mut device_vertices = vec![u32::MAX; b.mesh.positions.len()];
+    for (v, &i) in index.iter().enumerate() {
+        if i != u32::MAX {
+            device_vertices[i as usize] = v as u32;
+        }
+    }
+    (device_faces, device_vertices)
 }
 
 /// The interior grid (nodes strictly inside the corners `c0` and `c2`)
@@ -1208,12 +1283,14 @@ fn sides_and_cap(
                 top_ring.push(q);
             }
         }
+        b.surface = RegionSurface::Side(w);
         zip_strip(b, &pts, &top, |p| w.along(p), w.outward().extend(0.0));
     }
     if top_ring.first() == top_ring.last() {
         top_ring.pop();
     }
     let c = footprint.centre().extend(top_z);
+    b.surface = RegionSurface::Cap;
     for k in 0..top_ring.len() {
         let (p, q) = (top_ring[k], top_ring[(k + 1) % top_ring.len()]);
         b.triangle(c, p, q, cap_out);
@@ -1377,7 +1454,7 @@ mod tests {
             at(lo.x, hi.y, 0.0),
         ];
         let mut b = SolidBuilder::default();
-        square_with_bump(&mut b, square, &bump, DVec3::Z);
+        square_with_bump(&mut b, (0, square), &bump, DVec3::Z);
         let below = square.map(|p| p - DVec3::Z);
         for k in 0..4 {
             let (p, q) = (square[k], square[(k + 1) % 4]);
