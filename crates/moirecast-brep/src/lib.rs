@@ -6,6 +6,10 @@
 //! topology of the mesher's face partition ([`topology`]); see [`solid`]
 //! for what each face and edge is and what is guaranteed.
 //!
+//! [`mold`] builds a parting region of the mold (the block on one side of
+//! the parting surface, floored by the device's faces) the same way, from
+//! the region mesh's surface labels.
+//!
 //! ```
 //! use moirecast_kernel::{mesher::mesh_device, progress::Silent, Design, DesignParams, PitchSurface};
 //!
@@ -77,12 +81,7 @@ pub fn device_step_mapped(
 ) -> Result<DeviceStep, BrepError> {
     let mut brep = build_brep(design, dm)?;
     if let Some(map) = map {
-        let m = map.to_cols_array();
-        let matrix = truck_modeling::Matrix4::new(
-            m[0], m[1], m[2], 0.0, m[3], m[4], m[5], 0.0, m[6], m[7], m[8], 0.0, m[9], m[10],
-            m[11], 1.0,
-        );
-        brep.solid = truck_modeling::builder::transformed(&brep.solid, matrix);
+        brep.solid = truck_modeling::builder::transformed(&brep.solid, mold::matrix_of(map));
     }
     let step = step_file_of(std::slice::from_ref(&brep.solid), file_name, description);
     let s = &brep.stats;

@@ -21,7 +21,7 @@
 //! region mesh's positions (f32, as the STL halves).
 
 use crate::error::BrepError;
-use crate::solid::{assemble, crease_curve, lens_families, surface_face};
+use crate::solid::{assemble, crease_curve, face_facing, lens_families, surface_face};
 use crate::spline::{chord_lengths, clamped_knots, interpolate};
 use crate::topology::{pieces, Piece, Run};
 use glam::{DAffine3, DVec3};
@@ -410,16 +410,11 @@ fn make_face(
                 DVec3::new(at.x, at.y, at.z),
             ) * off_axis(outward, p0)
                 > 0.0;
-            let surface = Surface::RevolutedCurve(Processor::new(cone));
-            return if natural_is_outward {
-                Face::try_new(wires, surface)
-            } else {
-                let reversed: Vec<Wire> = wires.iter().map(|w| w.inverse()).collect();
-                Face::try_new(reversed, surface).map(|mut f| {
-                    f.invert();
-                    f
-                })
-            }
+            return face_facing(
+                Surface::RevolutedCurve(Processor::new(cone)),
+                natural_is_outward,
+                wires,
+            )
             .map_err(refuse);
         }
         RegionFace::Block(RegionSurface::Skirt(w)) => {
@@ -437,17 +432,12 @@ fn make_face(
                 0.5 * (mid.knot_vec()[0] + mid.knot_vec()[mid.knot_vec().len() - 1]),
                 0.5,
             );
-            let surface = Surface::BSplineSurface(skirt);
             // a graph over xy: its normal's z decides
-            return if nat.z * outward.z > 0.0 {
-                Face::try_new(wires, surface)
-            } else {
-                let reversed: Vec<Wire> = wires.iter().map(|w| w.inverse()).collect();
-                Face::try_new(reversed, surface).map(|mut f| {
-                    f.invert();
-                    f
-                })
-            }
+            return face_facing(
+                Surface::BSplineSurface(skirt),
+                nat.z * outward.z > 0.0,
+                wires,
+            )
             .map_err(refuse);
         }
         RegionFace::Block(other) => {

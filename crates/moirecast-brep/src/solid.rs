@@ -426,7 +426,20 @@ pub(crate) fn surface_face(
 ) -> Result<Face, truck_topology::errors::Error> {
     let nat = surface.normal(at.x, at.y);
     let natural_is_outward = outward.dot(DVec3::new(nat.x, nat.y, nat.z)) > 0.0;
-    let surface = Surface::NurbsSurface(surface.clone());
+    face_facing(
+        Surface::NurbsSurface(surface.clone()),
+        natural_is_outward,
+        wires,
+    )
+}
+
+/// A face on `surface` bounded by `wires` (counter-clockwise seen from
+/// outside), outward along the surface's natural normal or against it.
+pub(crate) fn face_facing(
+    surface: Surface,
+    natural_is_outward: bool,
+    wires: Vec<Wire>,
+) -> Result<Face, truck_topology::errors::Error> {
     if natural_is_outward {
         Face::try_new(wires, surface)
     } else {
