@@ -54,6 +54,11 @@ pub(super) struct MeshPlan {
     pub revealer_rows: Vec<f64>,
     /// Largest effective curvature along the revealer lenses (1/mm).
     pub revealer_kmax: f64,
+    /// Where the lenses' middles reach a whole spacing or more past a
+    /// wall row: the stations below the first (above the second) of
+    /// these, rows put in at the edge, are solved onto heights between the
+    /// wall and that row, column by column ([`edge_stations`]).
+    pub revealer_edge_blend: (Option<f64>, Option<f64>),
     /// Columns per base lens (lenses entirely outside the outline included).
     pub base_columns: BTreeMap<i64, usize>,
     /// Base row heights y, crossing rows included.
@@ -133,7 +138,8 @@ pub(super) fn plan(design: &Design, progress: &dyn Progress) -> Result<MeshPlan>
     let planner = Planner { design };
     let hh = design.half_height;
     progress.stage("surveying curvature", 2);
-    let (revealer_columns, revealer_rows, revealer_kmax) = planner.revealer_plan();
+    let (revealer_columns, (revealer_rows, revealer_edge_blend), revealer_kmax) =
+        planner.revealer_plan();
     progress.tick(1);
     let (base_columns, base_k, crease_samples) = planner.base_survey()?;
     progress.tick(1);
@@ -150,6 +156,7 @@ pub(super) fn plan(design: &Design, progress: &dyn Progress) -> Result<MeshPlan>
         revealer_columns,
         revealer_rows,
         revealer_kmax,
+        revealer_edge_blend,
         base_columns,
         base_rows,
         uniform_base_rows,
@@ -264,19 +271,41 @@ const OVERSHOOT_SLACK: f64 = 0.1;
 /// wider there than planned (found-1a8d59fd9f631a5f: 0.138 mm on a
 /// 0.16 mm spacing at a paraboloid's edge, 9 % over the tolerance). A
 /// station is put in so that the strip is no wider than planned, where
-/// the overshoot is less than the spacing.
-fn edge_stations(rows: &mut Vec<f64>, (lo, hi): (f64, f64)) {
+/// the overshoot is less than the spacing. Where it is not, no station
+/// can narrow the strip (its middle already spans the overshoot): rows are
+/// put in at the edge, evenly, as many as split the strip's middle into
+/// planned spacings, and returned as the station of the first row beyond
+/// them, for the revealer to solve them onto heights between the wall and
+/// that row (found-c59dc5572fb6e245: a paraboloid's lens 0.22 mm of
+/// station past a 0.205 mm spacing, 5 % over the tolerance).
+fn edge_stations(rows: &mut Vec<f64>, (lo, hi): (f64, f64)) -> (Option<f64>, Option<f64>) {
     let n = rows.len();
     if n < 2 {
-        return;
+        return (None, None);
     }
     let (first, last) = (rows[1] - rows[0], rows[n - 1] - rows[n - 2]);
+    let extra =
+        |overshoot: f64, spacing: f64| ((spacing + overshoot) / spacing).ceil() as usize - 1;
+    let mut blend = (None, None);
     if hi > OVERSHOOT_SLACK * last && hi < last {
         rows.insert(n - 1, rows[n - 1] - (last - hi));
+    } else if hi >= last && n > 2 {
+        blend.1 = Some(rows[n - 2]);
+        let m = extra(hi, last);
+        for k in 1..=m {
+            rows.insert(n - 2 + k, rows[n - 2] + last * k as f64 / (m + 1) as f64);
+        }
     }
     if lo > OVERSHOOT_SLACK * first && lo < first {
         rows.insert(1, rows[0] + (first - lo));
+    } else if lo >= first && rows.len() > 2 {
+        blend.0 = Some(rows[1]);
+        let m = extra(lo, first);
+        for k in 1..=m {
+            rows.insert(k, rows[0] + first * k as f64 / (m + 1) as f64);
+        }
     }
+    blend
 }
 
 /// The columns a lens needs, from the `columns` its station arcs need for
@@ -463,7 +492,8 @@ impl<'a> Planner<'a> {
     }
 
     /// Revealer: columns per lens, and rows (stations).
-    fn revealer_plan(&self) -> (Vec<usize>, Vec<f64>, f64) {
+    #[allow(clippy::type_complexity)]
+    fn revealer_plan(&self) -> (Vec<usize>, (Vec<f64>, (Option<f64>, Option<f64>)), f64) {
         let d = self.design;
         let cells = self.cells_over(2.0 * d.half_height, SURVEY_CELLS);
         let (stations, h) = self.survey_stations(0.0, cells);
@@ -499,8 +529,8 @@ impl<'a> Planner<'a> {
         let overshoot = surveys.iter().fold((0.0f64, 0.0f64), |(lo, hi), s| {
             (lo.max(s.overshoot.0), hi.max(s.overshoot.1))
         });
-        edge_stations(&mut rows, overshoot);
-        (columns, rows, kmax)
+        let blend = edge_stations(&mut rows, overshoot);
+        (columns, (rows, blend), kmax)
     }
 
     /// Base: columns per lens, effective curvature per y-cell, and crease

@@ -59,7 +59,7 @@ pub(super) fn vertices(
             Ok(row)
         })
         .collect::<Result<_>>()?;
-    blend_edge_rows(d, rev_rows, rev_columns, &mut rev_vertices)?;
+    blend_edge_rows(d, plan, &mut rev_vertices)?;
     // rows must not cross: every column's y increases from row to row
     for r in 0..last_row {
         for (a, b) in rev_vertices[r].iter().zip(&rev_vertices[r + 1]) {
@@ -85,12 +85,12 @@ const CLEAR_SHARE: f64 = 0.1;
 /// clears it (found-5ccf2202e1fe4549: a lens leaning 0.027 mm in y against
 /// a first spacing of 0.0257 mm). Every strip is then no wider, column by
 /// column, than the planned spacing at the creases.
-fn blend_edge_rows(
-    d: &Design,
-    rows: &[f64],
-    columns: &[usize],
-    vertices: &mut [RevealerRow],
-) -> Result<()> {
+///
+/// Likewise the rows the plan put in where the lenses' middles reach a
+/// whole spacing past a wall row (`revealer_edge_blend`): the first row
+/// at or past its station is the row they blend to.
+fn blend_edge_rows(d: &Design, plan: &MeshPlan, vertices: &mut [RevealerRow]) -> Result<()> {
+    let (rows, columns) = (&plan.revealer_rows, &plan.revealer_columns);
     let last = vertices.len() - 1;
     if last < 2 {
         return Ok(());
@@ -111,8 +111,12 @@ fn blend_edge_rows(
         }
         nearest > 0.0 && nearest >= CLEAR_SHARE * crease
     };
-    let low = (1..last).find(|&r| clears(&vertices[r], -hh, 1.0));
-    let high = (1..last).rev().find(|&r| clears(&vertices[r], hh, -1.0));
+    let (blend_low, blend_high) = plan.revealer_edge_blend;
+    let low = (1..last)
+        .find(|&r| clears(&vertices[r], -hh, 1.0) && blend_low.is_none_or(|v| rows[r] >= v));
+    let high = (1..last)
+        .rev()
+        .find(|&r| clears(&vertices[r], hh, -1.0) && blend_high.is_none_or(|v| rows[r] <= v));
     let (Some(low), Some(high)) = (low, high) else {
         return Ok(());
     };
