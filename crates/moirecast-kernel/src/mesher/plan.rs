@@ -58,7 +58,7 @@ pub(super) struct MeshPlan {
     /// wall row: the stations below the first (above the second) of
     /// these, rows put in at the edge, are solved onto heights between the
     /// wall and that row, column by column ([`edge_stations`]).
-    pub revealer_edge_blend: (Option<f64>, Option<f64>),
+    pub revealer_edge_blend: EdgeBlend,
     /// Columns per base lens (lenses entirely outside the outline included).
     pub base_columns: BTreeMap<i64, usize>,
     /// Base row heights y, crossing rows included.
@@ -68,6 +68,10 @@ pub(super) struct MeshPlan {
     /// Rows placed where a base crease crosses an x-wall.
     pub crossing_rows: usize,
 }
+
+/// Per wall (the first, the last), the station of the row that rows put
+/// in at that edge blend to, if any were ([`edge_stations`]).
+pub(super) type EdgeBlend = (Option<f64>, Option<f64>);
 
 impl MeshPlan {
     /// Triangles the plan makes, before the rows a wall's trim adds:
@@ -278,7 +282,7 @@ const OVERSHOOT_SLACK: f64 = 0.1;
 /// them, for the revealer to solve them onto heights between the wall and
 /// that row (found-c59dc5572fb6e245: a paraboloid's lens 0.22 mm of
 /// station past a 0.205 mm spacing, 5 % over the tolerance).
-fn edge_stations(rows: &mut Vec<f64>, (lo, hi): (f64, f64)) -> (Option<f64>, Option<f64>) {
+fn edge_stations(rows: &mut Vec<f64>, (lo, hi): (f64, f64)) -> EdgeBlend {
     let n = rows.len();
     if n < 2 {
         return (None, None);
@@ -492,8 +496,7 @@ impl<'a> Planner<'a> {
     }
 
     /// Revealer: columns per lens, and rows (stations).
-    #[allow(clippy::type_complexity)]
-    fn revealer_plan(&self) -> (Vec<usize>, (Vec<f64>, (Option<f64>, Option<f64>)), f64) {
+    fn revealer_plan(&self) -> (Vec<usize>, (Vec<f64>, EdgeBlend), f64) {
         let d = self.design;
         let cells = self.cells_over(2.0 * d.half_height, SURVEY_CELLS);
         let (stations, h) = self.survey_stations(0.0, cells);
