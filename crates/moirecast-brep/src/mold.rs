@@ -21,7 +21,9 @@
 //! region mesh's positions (f32, as the STL halves).
 
 use crate::error::BrepError;
-use crate::solid::{assemble, crease_curve, face_facing, lens_families, surface_face};
+use crate::solid::{
+    assemble, closed_solid, crease_curve, face_facing, lens_families, point3, surface_face,
+};
 use crate::spline::{chord_lengths, clamped_knots, interpolate};
 use crate::topology::{pieces, Piece, Run};
 use glam::{DAffine3, DVec3};
@@ -32,8 +34,8 @@ use moirecast_mold::parting::{self, Bump, PosedDevice, Rect, Region, RegionSurfa
 use std::collections::HashMap;
 use truck_modeling::{
     BSplineCurve, BSplineSurface, Curve, Face, KnotVec, Line, Matrix4, NurbsCurve, NurbsSurface,
-    ParametricSurface, ParametricSurface3D, Plane, Point3, Processor, RevolutedCurve, Shell,
-    ShellCondition, Solid, Surface, Transformed, Vector3, Vector4, Wire,
+    ParametricSurface, ParametricSurface3D, Plane, Point3, Processor, RevolutedCurve, Solid,
+    Surface, Transformed, Vector3, Vector4, Wire,
 };
 
 /// What a face of a region's B-rep lies on.
@@ -75,10 +77,6 @@ pub(crate) fn matrix_of(map: DAffine3) -> Matrix4 {
         m[0], m[1], m[2], 0.0, m[3], m[4], m[5], 0.0, m[6], m[7], m[8], 0.0, m[9], m[10], m[11],
         1.0,
     )
-}
-
-fn point3(p: DVec3) -> Point3 {
-    Point3::new(p.x, p.y, p.z)
 }
 
 /// The B-rep of `region`, a parting region of `posed` (the device mesh `dm`
@@ -187,18 +185,7 @@ pub fn region_brep(
     )?;
     let faces = assembled.faces.len();
     let rings = pieces.iter().map(|p| p.loops.len() - 1).sum();
-    let shell: Shell = assembled.faces.into();
-    let condition = shell.shell_condition();
-    if condition != ShellCondition::Closed {
-        return Err(BrepError::Truck {
-            what: "region shell",
-            detail: format!("shell condition is {condition:?}, not Closed"),
-        });
-    }
-    let solid = Solid::try_new(vec![shell]).map_err(|e| BrepError::Truck {
-        what: "region solid",
-        detail: e.to_string(),
-    })?;
+    let solid = closed_solid(assembled.faces, ("region shell", "region solid"))?;
     Ok(RegionBrep {
         solid,
         faces,

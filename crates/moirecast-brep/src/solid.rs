@@ -65,7 +65,7 @@ pub struct DeviceBrep {
     pub base: LensFamily,
 }
 
-fn point3(p: DVec3) -> Point3 {
+pub(crate) fn point3(p: DVec3) -> Point3 {
     Point3::new(p.x, p.y, p.z)
 }
 
@@ -128,19 +128,8 @@ pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepEr
         |piece, other, run| edge_curve(design, dm, piece, other, run, &surface_of),
         |piece, wires| make_face(design, dm, piece, wires, &surface_of),
     )?;
-    let shell: Shell = assembled.faces.into();
     let (edge_count, vertex_count) = (assembled.edges, assembled.vertices);
-    let condition = shell.shell_condition();
-    if condition != ShellCondition::Closed {
-        return Err(BrepError::Truck {
-            what: "shell",
-            detail: format!("shell condition is {condition:?}, not Closed"),
-        });
-    }
-    let solid = Solid::try_new(vec![shell]).map_err(|e| BrepError::Truck {
-        what: "solid",
-        detail: e.to_string(),
-    })?;
+    let solid = closed_solid(assembled.faces, ("shell", "solid"))?;
 
     let count = |f: &dyn Fn(&Piece) -> bool| pieces.iter().filter(|p| f(p)).count();
     let base_lenses = base.surfaces.len();
@@ -233,6 +222,26 @@ pub fn lens_families(
     };
     let (revealer, base) = rayon::join(|| family(Array::Revealer), || family(Array::Base));
     Ok((revealer?, base?))
+}
+
+/// One solid of `faces`, which must make a closed shell; `what` names the
+/// shell and the solid in the error.
+pub(crate) fn closed_solid(
+    faces: Vec<Face>,
+    (shell_what, solid_what): (&'static str, &'static str),
+) -> Result<Solid, BrepError> {
+    let shell: Shell = faces.into();
+    let condition = shell.shell_condition();
+    if condition != ShellCondition::Closed {
+        return Err(BrepError::Truck {
+            what: shell_what,
+            detail: format!("shell condition is {condition:?}, not Closed"),
+        });
+    }
+    Solid::try_new(vec![shell]).map_err(|e| BrepError::Truck {
+        what: solid_what,
+        detail: e.to_string(),
+    })
 }
 
 /// The faces of a B-rep with one truck `Edge` per boundary run, used by its
