@@ -22,6 +22,7 @@
 //! assert!(step.step.len() > 0);
 //! ```
 
+pub(crate) mod channels;
 pub mod crosscheck;
 pub mod error;
 pub mod lenses;

@@ -28,14 +28,14 @@ pub fn checked(operation: impl Into<String>, m: Manifold) -> Result<Manifold> {
 /// Imports a region whose first `device_faces.len()` triangles are faces of
 /// the device (traced under `device_id` with those face IDs) and whose last
 /// `interface` triangles are traced under `interface_id`; the rest carry a
-/// fresh original ID.
+/// fresh original ID, which it returns, and their index as face ID.
 pub fn to_region_manifold(
     what: &str,
     mesh: &Mesh,
     device_faces: &[u32],
     device_id: u32,
     (interface, interface_id): (usize, u32),
-) -> Result<Manifold> {
+) -> Result<(Manifold, u32)> {
     let own_id = Manifold::reserve_ids(1);
     let (k, n) = (device_faces.len(), mesh.triangles.len());
     let face_id = device_faces
@@ -49,7 +49,7 @@ pub fn to_region_manifold(
         run_index.push(3 * n as u64);
         run_original_id.push(interface_id);
     }
-    import(
+    let m = import(
         what,
         mesh,
         Some(Runs {
@@ -57,7 +57,8 @@ pub fn to_region_manifold(
             run_index,
             run_original_id,
         }),
-    )
+    )?;
+    Ok((m, own_id))
 }
 
 /// Imports a closed mesh.
@@ -300,6 +301,78 @@ pub fn channel_section(r: f64, twist: f64) -> Vec<DVec2> {
         .collect()
 }
 
+/// Where a channel primitive's axis runs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ChannelAxis {
+    /// Vertical, through this xy point; positions along it are heights.
+    Vertical(DVec2),
+    /// Horizontal, from `from` along the unit xy direction `dir`;
+    /// positions along it are distances from `from`.
+    Horizontal { from: DVec3, dir: DVec2 },
+}
+
+/// The exact solid a channel primitive's polygon stands for: a cylinder or
+/// a frustum of revolution. The booleans carry the primitive's original
+/// ID to every triangle of a half that lies on it, so a half's faces can
+/// be traced back to this shape (the mold's exact B-rep builds them on it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ChannelShape {
+    /// manifold's original ID of the primitive.
+    pub id: u32,
+    pub axis: ChannelAxis,
+    /// Where the primitive starts and ends along its axis.
+    pub span: (f64, f64),
+    /// Its radius at the span's start and at its end.
+    pub radii: (f64, f64),
+    /// The angle (radians, as [`ChannelShape::angle`] measures) of one of
+    /// the polygon's vertices: the side's two halves meet there and at the
+    /// opposite vertex, along polygon edges.
+    pub seam: f64,
+}
+
+impl ChannelShape {
+    /// The angle of `p` about the axis: for a vertical axis from +x towards
+    /// +y; for a horizontal one from the direction across it (`dir` turned
+    /// a quarter counter-clockwise) towards +z.
+    pub fn angle(&self, p: DVec3) -> f64 {
+        match self.axis {
+            ChannelAxis::Vertical(c) => (p.y - c.y).atan2(p.x - c.x),
+            ChannelAxis::Horizontal { from, dir } => {
+                let across = DVec2::new(-dir.y, dir.x);
+                let d = p - from;
+                (d.z).atan2(d.truncate().dot(across))
+            }
+        }
+    }
+
+    /// Which half of the side `p` is on: 0 within half a turn past the
+    /// seam, else 1.
+    pub fn half(&self, p: DVec3) -> usize {
+        let turn = (self.angle(p) - self.seam).rem_euclid(std::f64::consts::TAU);
+        usize::from(turn >= std::f64::consts::PI)
+    }
+
+    /// The unit direction of the axis.
+    pub fn direction(&self) -> DVec3 {
+        match self.axis {
+            ChannelAxis::Vertical(_) => DVec3::Z,
+            ChannelAxis::Horizontal { dir, .. } => dir.extend(0.0),
+        }
+    }
+}
+
+/// A channel primitive: its polygonal solid and the exact shape it stands for.
+#[derive(Clone)]
+pub struct Channel {
+    pub solid: Manifold,
+    pub shape: ChannelShape,
+}
+
+/// The original ID every triangle of the primitive `m` carries.
+fn original_id_of(m: &Manifold) -> u32 {
+    to_mesh(m).source.first().map_or(u32::MAX, |s| s.0)
+}
+
 /// A vertical frustum over `axis` from `z0` (radius `r0`) to `z1` (radius
 /// `r1`), its polygon turned `twist` degrees past the half facet.
 pub fn vertical_frustum(
@@ -308,15 +381,23 @@ pub fn vertical_frustum(
     z1: f64,
     (r0, r1): (f64, f64),
     twist: f64,
-) -> Result<Manifold> {
-    checked(
+) -> Result<Channel> {
+    let solid = checked(
         "vertical channel",
         snapped(
             Manifold::cylinder(z1 - z0, r0, r1, CIRCLE_SEGMENTS)
                 .rotate(0.0, 0.0, HALF_FACET_DEG + twist)
                 .translate(v3(axis.extend(z0))),
         ),
-    )
+    )?;
+    let shape = ChannelShape {
+        id: original_id_of(&solid),
+        axis: ChannelAxis::Vertical(axis),
+        span: (z0, z1),
+        radii: (r0, r1),
+        seam: (HALF_FACET_DEG + twist).to_radians(),
+    };
+    Ok(Channel { solid, shape })
 }
 
 /// A horizontal cylinder of radius `r` from `from` along the unit xy
@@ -328,9 +409,9 @@ pub fn horizontal_cylinder(
     length: f64,
     r: f64,
     twist: f64,
-) -> Result<Manifold> {
+) -> Result<Channel> {
     let angle = dir.y.atan2(dir.x).to_degrees();
-    checked(
+    let solid = checked(
         "runner",
         snapped(
             Manifold::cylinder(length, r, r, CIRCLE_SEGMENTS)
@@ -339,7 +420,17 @@ pub fn horizontal_cylinder(
                 .rotate(0.0, 0.0, angle)
                 .translate(v3(from)),
         ),
-    )
+    )?;
+    // a vertex at angle a about z goes to (across r sin a, up -r cos a),
+    // as in `channel_section`: at a - 90° about the runner's axis
+    let shape = ChannelShape {
+        id: original_id_of(&solid),
+        axis: ChannelAxis::Horizontal { from, dir },
+        span: (0.0, length),
+        radii: (r, r),
+        seam: (HALF_FACET_DEG + twist - 90.0).to_radians(),
+    };
+    Ok(Channel { solid, shape })
 }
 
 pub fn union_all(what: &str, parts: Vec<Manifold>) -> Result<Manifold> {

@@ -5,6 +5,7 @@
 
 use crate::boolean::{
     self, checked, cuboid, horizontal_cylinder, to_manifold, to_mesh, union_all, vertical_frustum,
+    ChannelShape,
 };
 use crate::error::{MoldError, Result};
 use crate::features::{self, Features};
@@ -43,6 +44,72 @@ pub enum HalfCut {
 pub(crate) struct Half {
     pub solid: CheckedMesh,
     pub source: Vec<(u32, u64)>,
+    /// Per triangle, the surface it lies on (filled in by [`cut_half`]).
+    pub surfaces: Vec<HalfSurface>,
+}
+
+/// What a triangle of a cut half lies on: the exact surface its face of
+/// the half's B-rep is built on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HalfSurface {
+    /// A face of the posed device: its triangle there.
+    Device(u32),
+    /// A surface of the half's region: its triangle there (whose
+    /// `Region::surfaces` entry names the surface).
+    Region(u32),
+    /// The side of channel k (of the mold's channel shapes): its first
+    /// half-turn from the seam (0) or its second (1).
+    ChannelSide(usize, usize),
+    /// The flat end of channel k.
+    ChannelEnd(usize),
+}
+
+/// Where the triangles of a half came from, as [`cut_half`] traced them.
+struct Origins<'a> {
+    device_id: u32,
+    /// The region's own original ID, and what to add to its face IDs to
+    /// get the region's triangle (the split leaves out some device faces).
+    own: (u32, i64),
+    channels: &'a [ChannelShape],
+}
+
+impl Origins<'_> {
+    /// The surface of each of `half`'s triangles.
+    fn surfaces(&self, half: &Half) -> Result<Vec<HalfSurface>> {
+        let by_id: std::collections::HashMap<u32, usize> = self
+            .channels
+            .iter()
+            .enumerate()
+            .map(|(k, c)| (c.id, k))
+            .collect();
+        let m = half.solid.mesh();
+        m.triangles
+            .iter()
+            .zip(&half.source)
+            .map(|(t, &(id, face))| {
+                if id == self.device_id {
+                    return Ok(HalfSurface::Device(face as u32));
+                }
+                if id == self.own.0 {
+                    return Ok(HalfSurface::Region((face as i64 + self.own.1) as u32));
+                }
+                let Some(&k) = by_id.get(&id) else {
+                    return Err(MoldError::NotSolid {
+                        what: "mold half",
+                        detail: format!("a triangle from unknown mesh {id}"),
+                    });
+                };
+                let [a, b, c] = t.map(|v| m.positions[v as usize]);
+                let normal = (b - a).cross(c - a).normalize_or_zero();
+                let shape = &self.channels[k];
+                Ok(if normal.dot(shape.direction()).abs() > 0.5 {
+                    HalfSurface::ChannelEnd(k)
+                } else {
+                    HalfSurface::ChannelSide(k, shape.half((a + b + c) / 3.0))
+                })
+            })
+            .collect()
+    }
 }
 
 /// A half, checked, with its mesh and its solid checks (genus `genus`). If
@@ -62,6 +129,7 @@ fn sliver_free(
     let checked_half = |traced: boolean::Traced| Half {
         solid: CheckedMesh::check(traced.mesh, spec),
         source: traced.source,
+        surfaces: Vec::new(),
     };
     let Some(traced) = join(to_mesh(&half)) else {
         return Ok(None);
@@ -158,6 +226,8 @@ fn has_slivers(checks: &[CheckResult]) -> bool {
 pub(crate) struct KeySolids {
     pub bumps: Vec<Manifold>,
     pub sockets: Vec<Manifold>,
+    /// The sockets' exact shapes.
+    pub socket_shapes: Vec<ChannelShape>,
     /// Each bump's rings, as the bottom region builds its bump from them.
     pub rings: Vec<parting::Bump>,
 }
@@ -168,23 +238,22 @@ impl KeySolids {
         let (h, c) = (p.key_height, p.key_clearance);
         let r_low = p.key_diameter / 2.0 + 0.5 * h * tan;
         let mut bumps = Vec::new();
-        let mut sockets = Vec::new();
+        let (mut sockets, mut socket_shapes) = (Vec::new(), Vec::new());
         for k in &f.keys {
             let (xy, z) = (k.at.truncate(), k.at.z);
-            bumps.push(vertical_frustum(
-                xy,
-                z - 0.5 * h,
-                z + h,
-                (r_low, r_low - 1.5 * h * tan),
-                0.0,
-            )?);
-            sockets.push(vertical_frustum(
+            bumps.push(
+                vertical_frustum(xy, z - 0.5 * h, z + h, (r_low, r_low - 1.5 * h * tan), 0.0)?
+                    .solid,
+            );
+            let socket = vertical_frustum(
                 xy,
                 z - 0.5 * h,
                 z + h + c,
                 (r_low + c, r_low + c - (1.5 * h + c) * tan),
                 0.0,
-            )?);
+            )?;
+            sockets.push(socket.solid);
+            socket_shapes.push(socket.shape);
         }
         let rings = f
             .keys
@@ -195,6 +264,7 @@ impl KeySolids {
         Ok(KeySolids {
             bumps,
             sockets,
+            socket_shapes,
             rings,
         })
     }
@@ -298,10 +368,17 @@ pub(crate) struct Channels {
     pub all: Manifold,
     /// Those and the key sockets: what the top half loses.
     pub top_cut: Manifold,
+    /// The exact shape of every primitive of `top_cut`.
+    pub shapes: Vec<ChannelShape>,
 }
 
 impl Channels {
-    pub fn new(f: &Features, p: &MoldParams, sockets: &Manifold, twist: f64) -> Result<Self> {
+    pub fn new(
+        f: &Features,
+        p: &MoldParams,
+        (sockets, socket_shapes): (&Manifold, &[ChannelShape]),
+        twist: f64,
+    ) -> Result<Self> {
         let past_top = f.block_hi.z + PAST_BLOCK_MM;
         let g = &f.gate;
         let (from, dir, length) = features::runner_span(g);
@@ -314,24 +391,24 @@ impl Channels {
                 (g.sprue_radius, g.sprue_radius),
                 twist,
             )?,
-            {
-                let floor = f.block_hi.z - g.cone_depth;
-                let r_top = g.sprue_radius
-                    + (g.cone_radius - g.sprue_radius) * (past_top - floor)
-                        / g.cone_depth.max(1e-9);
-                if g.cone_depth > 0.0 {
-                    vertical_frustum(
-                        g.sprue_axis,
-                        floor,
-                        past_top,
-                        (g.sprue_radius, r_top),
-                        twist,
-                    )?
-                } else {
-                    Manifold::empty()
-                }
-            },
         ];
+        // no cone: an empty solid in its place, so the union sees the
+        // same operands in the same order
+        let cone = if g.cone_depth > 0.0 {
+            let floor = f.block_hi.z - g.cone_depth;
+            let r_top = g.sprue_radius
+                + (g.cone_radius - g.sprue_radius) * (past_top - floor) / g.cone_depth.max(1e-9);
+            Some(vertical_frustum(
+                g.sprue_axis,
+                floor,
+                past_top,
+                (g.sprue_radius, r_top),
+                twist,
+            )?)
+        } else {
+            None
+        };
+        fill.extend(cone);
         for v in &f.vents {
             fill.push(vertical_frustum(
                 v.axis,
@@ -341,26 +418,40 @@ impl Channels {
                 twist,
             )?);
         }
-        let fill = union_all("runner, sprue and vents", fill)?;
         let bolt_r = p.bolt_diameter / 2.0;
-        let bolts = union_all(
-            "bolt holes",
-            f.bolts
-                .iter()
-                .map(|&b| {
-                    vertical_frustum(
-                        b,
-                        f.block_lo.z - PAST_BLOCK_MM,
-                        past_top,
-                        (bolt_r, bolt_r),
-                        twist,
-                    )
-                })
-                .collect::<Result<_>>()?,
-        )?;
+        let bolts = f
+            .bolts
+            .iter()
+            .map(|&b| {
+                vertical_frustum(
+                    b,
+                    f.block_lo.z - PAST_BLOCK_MM,
+                    past_top,
+                    (bolt_r, bolt_r),
+                    twist,
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let shapes = fill
+            .iter()
+            .chain(&bolts)
+            .map(|c| c.shape)
+            .chain(socket_shapes.iter().copied())
+            .collect();
+        let mut fill_solids: Vec<Manifold> = fill.into_iter().map(|c| c.solid).collect();
+        if g.cone_depth <= 0.0 {
+            fill_solids.insert(2, Manifold::empty());
+        }
+        let fill = union_all("runner, sprue and vents", fill_solids)?;
+        let bolts = union_all("bolt holes", bolts.into_iter().map(|c| c.solid).collect())?;
         let all = checked("channels", fill.union(&bolts))?;
         let top_cut = checked("channels and sockets", all.union(sockets))?;
-        Ok(Channels { fill, all, top_cut })
+        Ok(Channels {
+            fill,
+            all,
+            top_cut,
+            shapes,
+        })
     }
 }
 
@@ -389,6 +480,7 @@ pub(crate) struct CutInputs<'a> {
     pub regions: &'a Regions,
     pub block: &'a Manifold,
     pub sockets: &'a Manifold,
+    pub socket_shapes: &'a [ChannelShape],
     pub cut_by: HalfCut,
 }
 
@@ -398,7 +490,7 @@ pub(crate) struct CutInputs<'a> {
 /// are built again turned a quarter facet.
 pub(crate) fn cut_halves(c: &CutInputs) -> Result<Cut> {
     let (f, regions) = (c.f, c.regions);
-    let mut channels = Channels::new(f, c.p, c.sockets, 0.0)?;
+    let mut channels = Channels::new(f, c.p, (c.sockets, c.socket_shapes), 0.0)?;
     let genus_top = 1 + f.vents.len() as u32 + f.bolts.len() as u32;
     let genus_bottom = f.bolts.len() as u32;
     let device_id = Manifold::reserve_ids(1);
@@ -408,12 +500,12 @@ pub(crate) fn cut_halves(c: &CutInputs) -> Result<Cut> {
     let ids = (device_id, interface_id);
     let above_side = (Face::Upper, 1.0, f.block_hi.z);
     let below_side = (Face::Lower, -1.0, f.block_lo.z);
-    let top_chain = |top_cut: &Manifold, channels_in_block: &Manifold| -> Result<_> {
+    let top_chain = |ch: &Channels, channels_in_block: &Manifold| -> Result<_> {
         let (half, top) = cut_half(
             c,
             ("top half", &regions.top),
             above_side,
-            top_cut,
+            (&ch.top_cut, &ch.shapes),
             genus_top,
             ids,
         )?;
@@ -423,12 +515,12 @@ pub(crate) fn cut_halves(c: &CutInputs) -> Result<Cut> {
         )?;
         Ok((half, beside_top))
     };
-    let bottom_chain = |channels: &Manifold| -> Result<_> {
+    let bottom_chain = |ch: &Channels| -> Result<_> {
         cut_half(
             c,
             ("bottom half", &regions.bottom),
             below_side,
-            channels,
+            (&ch.all, &ch.shapes),
             genus_bottom,
             ids,
         )
@@ -438,8 +530,8 @@ pub(crate) fn cut_halves(c: &CutInputs) -> Result<Cut> {
     let ((top_t, bottom_t), tiling) = rayon::join(
         || {
             rayon::join(
-                || top_chain(&channels.top_cut, &channels_in_block),
-                || bottom_chain(&channels.all),
+                || top_chain(&channels, &channels_in_block),
+                || bottom_chain(&channels),
             )
         },
         || {
@@ -455,11 +547,16 @@ pub(crate) fn cut_halves(c: &CutInputs) -> Result<Cut> {
     // the channels are built again turned a quarter facet.
     let mut turned_note = None;
     if has_slivers(top_h.solid.checks()) || has_slivers(bottom_h.solid.checks()) {
-        channels = Channels::new(f, c.p, c.sockets, boolean::QUARTER_FACET_DEG)?;
+        channels = Channels::new(
+            f,
+            c.p,
+            (c.sockets, c.socket_shapes),
+            boolean::QUARTER_FACET_DEG,
+        )?;
         channels_in_block = checked("channels in the block", channels.all.intersection(c.block))?;
         let (t, b) = rayon::join(
-            || top_chain(&channels.top_cut, &channels_in_block),
-            || bottom_chain(&channels.all),
+            || top_chain(&channels, &channels_in_block),
+            || bottom_chain(&channels),
         );
         ((top_h, beside_top), (bottom_h, _)) = (t?, b?);
         turned_note = Some(format!(
@@ -492,7 +589,7 @@ fn cut_half(
     c: &CutInputs,
     (what, region): (&str, &Region),
     (kind, side, cap_z): (Face, f64, f64),
-    cut: &Manifold,
+    (cut, shapes): (&Manifold, &[ChannelShape]),
     genus: u32,
     (device_id, interface_id): (u32, u32),
 ) -> Result<(Half, Manifold)> {
@@ -511,8 +608,17 @@ fn cut_half(
         }
         HalfCut::Whole => None,
     };
+    let traced = |mut half: Half, own: (u32, i64)| -> Result<Half> {
+        half.surfaces = Origins {
+            device_id,
+            own,
+            channels: shapes,
+        }
+        .surfaces(&half)?;
+        Ok(half)
+    };
     if let Some(s) = split {
-        let near = boolean::to_region_manifold(
+        let (near, own_id) = boolean::to_region_manifold(
             what,
             &s.near,
             &s.near_device_faces,
@@ -523,10 +629,13 @@ fn cut_half(
             s.join(region, t, interface_id, device_id)
         })?;
         if let Some(done) = joined {
-            return Ok((done, near));
+            // the near part's own faces are the region's, past the
+            // device faces the patch took
+            let skipped = region.device_faces.len() as i64 - s.near_device_faces.len() as i64;
+            return Ok((traced(done, (own_id, skipped))?, near));
         }
     }
-    let whole = boolean::to_region_manifold(
+    let (whole, own_id) = boolean::to_region_manifold(
         what,
         &region.mesh,
         &region.device_faces,
@@ -535,7 +644,7 @@ fn cut_half(
     )?;
     let done = sliver_free(what, whole.difference(cut), genus, Some)?
         .expect("a whole region needs no joining");
-    Ok((done, whole))
+    Ok((traced(done, (own_id, 0))?, whole))
 }
 
 /// The block's two parts as manifolds: the box itself and the region above

@@ -31,7 +31,8 @@ pub mod parting;
 pub mod split;
 pub mod tiling;
 
-pub use cut::HalfCut;
+pub use boolean::{ChannelAxis, ChannelShape};
+pub use cut::{HalfCut, HalfSurface};
 pub use error::{MoldError, MoldParam, Result};
 pub use features::{Features, Gate, Key, Vent, VentPlace};
 pub use invariants::{Draft, Volumes, CAVITY_ON_DEVICE_MM, OVERLAP_MM3, VOLUME_SUM_REL};
@@ -67,6 +68,33 @@ pub struct Mold {
     /// The solids the halves were made from, so that another tool can
     /// rebuild the halves from them and the device (see `assembly.scad`).
     pub construction: Vec<ConstructionSolid>,
+    /// What the halves' exact B-rep is built from.
+    pub exact: ExactParts,
+}
+
+/// What the halves' exact B-rep is built from: the posed device, each
+/// half's region with the surface every triangle of the half lies on, and
+/// the channels' exact shapes.
+pub struct ExactParts {
+    pub posed: PosedDevice,
+    /// The block's footprint.
+    pub footprint: parting::Rect,
+    /// Every channel primitive, sockets last ([`HalfSurface`] indexes it).
+    pub channels: Vec<ChannelShape>,
+    /// The key bumps the bottom region stands on its corner squares.
+    pub bumps: Vec<parting::Bump>,
+    pub top: TracedHalf,
+    pub bottom: TracedHalf,
+}
+
+/// A half as traced through the booleans.
+pub struct TracedHalf {
+    /// The half before its channels.
+    pub region: parting::Region,
+    /// The height of its cap (the block's top or bottom face).
+    pub cap_z: f64,
+    /// Per triangle of the half's mesh, the surface it lies on.
+    pub surfaces: Vec<HalfSurface>,
 }
 
 /// A solid the halves were built from.
@@ -136,6 +164,7 @@ pub fn build_mold_with(
         regions: &regions,
         block: &block,
         sockets: &sockets,
+        socket_shapes: &keys.socket_shapes,
         cut_by,
     })?;
     progress.tick(1);
@@ -160,10 +189,10 @@ pub fn build_mold_with(
     progress.tick(1);
 
     Ok(assemble(
-        posed.mesh,
+        posed,
         f,
         cut,
-        (regions, bumps, sockets),
+        (regions, keys.rings, bumps, sockets),
         (volumes, drafts),
         checks,
     ))
@@ -172,10 +201,10 @@ pub fn build_mold_with(
 /// The mold, with the construction solids another tool rebuilds the
 /// halves from.
 fn assemble(
-    device: Mesh,
+    posed: PosedDevice,
     f: Features,
     cut: cut::Cut,
-    (regions, bumps, sockets): (Regions, Manifold, Manifold),
+    (regions, rings, bumps, sockets): (Regions, Vec<parting::Bump>, Manifold, Manifold),
     (volumes, (draft_top, draft_bottom)): (Volumes, (Draft, Draft)),
     checks: Vec<CheckResult>,
 ) -> Mold {
@@ -213,10 +242,26 @@ fn assemble(
         },
     ];
     let parting_triangles = construction[0].mesh.triangles.len();
+    let exact = ExactParts {
+        footprint: features::block_rect(&f),
+        channels: cut.channels.shapes,
+        bumps: rings,
+        top: TracedHalf {
+            region: regions.top,
+            cap_z: f.block_hi.z,
+            surfaces: cut.top.surfaces,
+        },
+        bottom: TracedHalf {
+            region: regions.bottom,
+            cap_z: f.block_lo.z,
+            surfaces: cut.bottom.surfaces,
+        },
+        posed,
+    };
     let mut features = f;
     features.warnings.extend(cut.turned_note);
     Mold {
-        device,
+        device: exact.posed.mesh.clone(),
         top: cut.top.solid,
         bottom: cut.bottom.solid,
         features,
@@ -228,5 +273,6 @@ fn assemble(
         parting_triangles,
         checks,
         construction,
+        exact,
     }
 }

@@ -1,0 +1,282 @@
+//! The mold's channels and keys' sockets as exact surfaces, and the curves
+//! where they meet the other faces of a half.
+//!
+//! A channel primitive stands for a cylinder or a frustum of revolution
+//! ([`ChannelShape`]); its side is a line revolved about its axis, its
+//! ends are planes. Where a side meets a plane across its axis the edge is
+//! an exact circle (rational quadratic arcs). Elsewhere (a lens, the
+//! skirt, another channel) the edge is the C² cubic through points solved
+//! exactly onto both surfaces, one at each mesh vertex of the edge, at the
+//! angle about the axis that vertex has; the cubic breaks (C⁰) where the
+//! other surface has a crease, as the skirt has along its rulings.
+//!
+//! **Guarantee.** Every solved point lies on both exact surfaces to 1e-10
+//! mm; between them the cubic is within O(h⁴) of the exact curve, h the
+//! spacing of the mesh vertices (at most a 48th of a turn).
+
+use crate::error::BrepError;
+use crate::solid::point3;
+use crate::spline::{chord_lengths, clamped_knots, interpolate};
+use glam::{DMat3, DVec3};
+use moirecast_mold::{ChannelAxis, ChannelShape};
+use truck_modeling::{
+    BSplineCurve, Curve, KnotVec, Line, NurbsCurve, NurbsSurface, ParametricSurface,
+    ParametricSurface3D, Point3, RevolutedCurve, SearchNearestParameter, Vector3, Vector4,
+};
+
+/// A channel's frame: a point of its axis (position 0), the axis's unit
+/// direction, and the two unit directions angles are measured from and
+/// towards ([`ChannelShape::angle`]).
+pub(crate) struct ChannelFrame {
+    pub origin: DVec3,
+    pub axis: DVec3,
+    pub e1: DVec3,
+    pub e2: DVec3,
+}
+
+pub(crate) fn frame(c: &ChannelShape) -> ChannelFrame {
+    match c.axis {
+        ChannelAxis::Vertical(at) => ChannelFrame {
+            origin: at.extend(0.0),
+            axis: DVec3::Z,
+            e1: DVec3::X,
+            e2: DVec3::Y,
+        },
+        ChannelAxis::Horizontal { from, dir } => ChannelFrame {
+            origin: from,
+            axis: dir.extend(0.0),
+            e1: DVec3::new(-dir.y, dir.x, 0.0),
+            e2: DVec3::Z,
+        },
+    }
+}
+
+impl ChannelFrame {
+    /// Where `p` lies along the axis.
+    pub fn along(&self, p: DVec3) -> f64 {
+        (p - self.origin).dot(self.axis)
+    }
+
+    /// The unit direction at `angle` across the axis.
+    pub fn radial(&self, angle: f64) -> DVec3 {
+        angle.cos() * self.e1 + angle.sin() * self.e2
+    }
+
+    /// How far `p` lies from the axis.
+    pub fn distance(&self, p: DVec3) -> f64 {
+        let d = p - self.origin;
+        (d - d.dot(self.axis) * self.axis).length()
+    }
+}
+
+/// The radius of `c` at position `h` along its axis (linear over its span).
+pub(crate) fn radius_at(c: &ChannelShape, h: f64) -> f64 {
+    let (h0, h1) = c.span;
+    let (r0, r1) = c.radii;
+    r0 + (r1 - r0) * (h - h0) / (h1 - h0)
+}
+
+/// The point of `c`'s exact side at `angle` and position `h`.
+pub(crate) fn on_side(c: &ChannelShape, f: &ChannelFrame, angle: f64, h: f64) -> DVec3 {
+    f.origin + h * f.axis + radius_at(c, h) * f.radial(angle)
+}
+
+/// `c`'s side as a truck surface: its generator at the seam, a tenth
+/// longer than its span at both ends, revolved about its axis.
+pub(crate) fn side_surface(c: &ChannelShape) -> RevolutedCurve<Curve> {
+    let f = frame(c);
+    let (h0, h1) = c.span;
+    let pad = 0.1 * (h1 - h0);
+    let (a, b) = (
+        on_side(c, &f, c.seam, h0 - pad),
+        on_side(c, &f, c.seam, h1 + pad),
+    );
+    let axis = Vector3::new(f.axis.x, f.axis.y, f.axis.z);
+    RevolutedCurve::by_revolution(
+        Curve::Line(Line(point3(a), point3(b))),
+        point3(f.origin),
+        axis,
+    )
+}
+
+/// Whether `surface` (a revolved side of axis `f`) faces away from its
+/// axis along its natural normal, as `outward` (a mesh triangle's normal
+/// at `at`) faces: both point off the axis, or both onto it.
+pub(crate) fn natural_is_outward(
+    surface: &RevolutedCurve<Curve>,
+    f: &ChannelFrame,
+    outward: DVec3,
+    at: DVec3,
+) -> bool {
+    let off_axis = |n: DVec3, p: DVec3| {
+        let d = p - f.origin;
+        (d - d.dot(f.axis) * f.axis).dot(n)
+    };
+    let nat = surface.normal(0.5, 0.0);
+    let p = surface.subs(0.5, 0.0);
+    off_axis(DVec3::new(nat.x, nat.y, nat.z), DVec3::new(p.x, p.y, p.z)) * off_axis(outward, at)
+        > 0.0
+}
+
+/// The arc of the circle about `centre` of radius `r` in the plane of the
+/// unit directions `e1` and `e2` through `pts` (in order, near that
+/// circle), from the first point's angle to the last's: rational quadratic
+/// pieces of at most a quarter turn.
+pub(crate) fn circle_arc(centre: DVec3, (e1, e2): (DVec3, DVec3), r: f64, pts: &[DVec3]) -> Curve {
+    let angle = |p: DVec3| (p - centre).dot(e2).atan2((p - centre).dot(e1));
+    // unwrapped: each step between neighbours is the short way round
+    let start = angle(pts[0]);
+    let mut sweep = 0.0;
+    for w in pts.windows(2) {
+        let mut d = angle(w[1]) - angle(w[0]);
+        d -= std::f64::consts::TAU * (d / std::f64::consts::TAU).round();
+        sweep += d;
+    }
+    let pieces = (sweep.abs() / std::f64::consts::FRAC_PI_2).ceil().max(1.0) as usize;
+    let step = sweep / pieces as f64;
+    let w_mid = (0.5 * step).cos();
+    let on_circle = |t: f64, radius: f64, w: f64| {
+        let p = centre + radius * (t.cos() * e1 + t.sin() * e2);
+        Vector4::new(p.x * w, p.y * w, p.z * w, w)
+    };
+    let mut ctrl = vec![on_circle(start, r, 1.0)];
+    let mut knots = vec![0.0; 3];
+    for i in 0..pieces {
+        let t0 = start + step * i as f64;
+        ctrl.push(on_circle(t0 + 0.5 * step, r / w_mid, w_mid));
+        ctrl.push(on_circle(t0 + step, r, 1.0));
+        let k = (i + 1) as f64 / pieces as f64;
+        knots.extend(if i + 1 == pieces {
+            [k; 3].to_vec()
+        } else {
+            vec![k, k]
+        });
+    }
+    Curve::NurbsCurve(NurbsCurve::new(BSplineCurve::new(
+        KnotVec::from(knots),
+        ctrl,
+    )))
+}
+
+/// The circle where `c`'s side crosses the plane across its axis at
+/// position `h`, as an arc through `pts`.
+pub(crate) fn section_arc(c: &ChannelShape, h: f64, pts: &[DVec3]) -> Curve {
+    let f = frame(c);
+    circle_arc(f.origin + h * f.axis, (f.e1, f.e2), radius_at(c, h), pts)
+}
+
+/// A surface a channel's edge is solved onto.
+pub(crate) enum Other<'a> {
+    /// Where this function (of roughly unit gradient) is 0.
+    Implicit(&'a dyn Fn(DVec3) -> f64),
+    /// A NURBS lens surface.
+    Lens(&'a NurbsSurface<Vector4>),
+}
+
+/// How many Newton or secant steps a solve takes at most.
+const SOLVE_STEPS: usize = 40;
+/// When a solved point counts as on both surfaces (mm).
+const SOLVED_MM: f64 = 1e-10;
+
+/// The point where `c`'s side at the angle of `p` meets `other`, near `p`.
+pub(crate) fn solve_on_side(
+    c: &ChannelShape,
+    f: &ChannelFrame,
+    other: &Other,
+    p: DVec3,
+) -> Result<DVec3, BrepError> {
+    let angle = c.angle(p);
+    let h0 = f.along(p);
+    let at = |h: f64| on_side(c, f, angle, h);
+    let fail = || {
+        BrepError::Topology(format!(
+            "a channel's edge point near {p} does not solve onto the surface it meets"
+        ))
+    };
+    match other {
+        Other::Implicit(g) => {
+            // secant steps from the mesh point's position
+            let (mut a, mut b) = (h0, h0 + 1e-4);
+            let (mut ga, mut gb) = (g(at(a)), g(at(b)));
+            for _ in 0..SOLVE_STEPS {
+                if gb.abs() < SOLVED_MM {
+                    return Ok(at(b));
+                }
+                if gb == ga {
+                    break;
+                }
+                let next = b - gb * (b - a) / (gb - ga);
+                (a, ga) = (b, gb);
+                b = next;
+                gb = g(at(b));
+            }
+            if gb.abs() < SOLVED_MM {
+                Ok(at(b))
+            } else {
+                Err(fail())
+            }
+        }
+        Other::Lens(s) => {
+            let (mut u, mut v) = s
+                .search_nearest_parameter(point3(p), None, 100)
+                .ok_or_else(fail)?;
+            let mut h = h0;
+            let d3 = |v: Vector3| DVec3::new(v.x, v.y, v.z);
+            for _ in 0..SOLVE_STEPS {
+                let q = s.subs(u, v);
+                let x = at(h);
+                let r = DVec3::new(q.x, q.y, q.z) - x;
+                if r.length() < SOLVED_MM {
+                    return Ok(x);
+                }
+                let dx = (at(h + 1e-6) - at(h - 1e-6)) / 2e-6;
+                let jac = DMat3::from_cols(d3(s.uder(u, v)), d3(s.vder(u, v)), -dx);
+                if jac.determinant().abs() < 1e-300 {
+                    break;
+                }
+                let step = jac.inverse() * r;
+                u -= step.x;
+                v -= step.y;
+                h -= step.z;
+            }
+            Err(fail())
+        }
+    }
+}
+
+/// The edge through the exact points `pts` (in order), C² between breaks
+/// and C⁰ at the indices in `breaks`: cubic pieces, each through its
+/// points, joined end to end in one B-spline.
+pub(crate) fn piecewise_cubic(pts: &[DVec3], breaks: &[usize]) -> Curve {
+    let mut cuts: Vec<usize> = breaks
+        .iter()
+        .copied()
+        .filter(|&i| i > 0 && i + 1 < pts.len())
+        .collect();
+    cuts.sort_unstable();
+    cuts.dedup();
+    let mut bounds = vec![0];
+    bounds.extend(cuts);
+    bounds.push(pts.len() - 1);
+    let (mut ctrl, mut knots): (Vec<Point3>, Vec<f64>) = (Vec::new(), Vec::new());
+    let mut offset = 0.0;
+    for (i, w) in bounds.windows(2).enumerate() {
+        let piece = &pts[w[0]..=w[1]];
+        let s: Vec<f64> = chord_lengths(piece).iter().map(|t| t + offset).collect();
+        let data: Vec<[f64; 3]> = piece.iter().map(|p| p.to_array()).collect();
+        let c = interpolate(&s, &data);
+        let k: Vec<f64> = clamped_knots(&s).into_iter().copied().collect();
+        if i == 0 {
+            ctrl.extend(c.iter().map(|&c| point3(DVec3::from_array(c))));
+            knots.extend(&k[..k.len() - 1]);
+        } else {
+            // the shared end is the last piece's last point: drop its copy,
+            // and one of the join knot's four copies
+            ctrl.extend(c.iter().skip(1).map(|&c| point3(DVec3::from_array(c))));
+            knots.extend(&k[4..k.len() - 1]);
+        }
+        offset = s[s.len() - 1];
+    }
+    knots.push(offset);
+    Curve::BSplineCurve(BSplineCurve::new(KnotVec::from(knots), ctrl))
+}
