@@ -372,9 +372,30 @@ enum ToWrite<'m> {
     Unchecked(&'m moirecast_kernel::Mesh, SolidSpec),
 }
 
+/// The STL bytes of the solid `job` and its file report, or the first of
+/// its solid checks that failed.
+fn encoded_stl(name: &str, job: &ToWrite) -> Result<(Vec<u8>, report::FileReport)> {
+    let fresh;
+    let (checks, solid) = match job {
+        ToWrite::Checked(mesh) => (mesh.checks(), mesh.solid()),
+        ToWrite::Unchecked(mesh, spec) => {
+            fresh = SolidMesh::validate_for(mesh, *spec);
+            (&fresh.0[..], fresh.1)
+        }
+    };
+    let Some(solid) = solid else {
+        RunError::first_failed(checks, "")?;
+        unreachable!("{name} is a solid when its checks pass");
+    };
+    let bytes = stl_bytes(name, solid)?;
+    let file = report::FileReport::of(solid.mesh(), bytes.len());
+    Ok((bytes, file))
+}
+
 /// `moirecast mold`: builds the device of `spec` and its two-piece mold and
-/// writes `device.stl`, `mold-top.stl`, `mold-bottom.stl`, `assembly.scad`
-/// and `report.json` into `out` — all of them, or nothing.
+/// writes `device.stl`, `mold-top.stl`, `mold-bottom.stl`, their exact
+/// B-reps `device.step`, `mold-top.step` and `mold-bottom.step`,
+/// `assembly.scad` and `report.json` into `out` — all of them, or nothing.
 ///
 /// Every check runs before anything is written. A failed check is an error
 /// naming it and the place; with `force` the files are written anyway and
@@ -439,30 +460,25 @@ pub fn run_mold(
         ));
     }
     use rayon::prelude::*;
-    let ((device_checks, device), encoded) = rayon::join(
-        || SolidMesh::validate(&mold.device),
+    // The halves' exact B-reps are built beside the STL encoding.
+    let (((device_checks, device), encoded), halves) = rayon::join(
         || {
-            jobs.par_iter()
-                .map(|(name, job)| -> Result<(Vec<u8>, report::FileReport)> {
-                    let fresh;
-                    let (checks, solid) = match job {
-                        ToWrite::Checked(mesh) => (mesh.checks(), mesh.solid()),
-                        ToWrite::Unchecked(mesh, spec) => {
-                            fresh = SolidMesh::validate_for(mesh, *spec);
-                            (&fresh.0[..], fresh.1)
-                        }
-                    };
-                    let Some(solid) = solid else {
-                        RunError::first_failed(checks, "")?;
-                        unreachable!("{name} is a solid when its checks pass");
-                    };
-                    let bytes = stl_bytes(name, solid)?;
-                    let file = report::FileReport::of(solid.mesh(), bytes.len());
-                    Ok((bytes, file))
-                })
-                .collect::<Vec<_>>()
+            rayon::join(
+                || SolidMesh::validate(&mold.device),
+                || {
+                    jobs.par_iter()
+                        .map(|(name, job)| encoded_stl(name, job))
+                        .collect::<Vec<_>>()
+                },
+            )
         },
+        || moirecast_brep::mold_step(&spec.design, &build.mesh, &mold),
     );
+    let halves = halves.map_err(|e| RunError::Internal {
+        stage: "building the mold halves' B-reps",
+        detail: e.to_string(),
+    })?;
+    checks.extend(halves.checks.iter().cloned());
     let device_check_count = device_checks.len();
     checks.splice(0..0, device_checks);
     if !force {
@@ -498,8 +514,10 @@ pub fn run_mold(
         )
         .into_bytes(),
     );
-    let report = mold_report::mold_report(spec, &mold, &checks, reports, &step);
+    let report = mold_report::mold_report(spec, &mold, &checks, reports, (&step, &halves));
     files.add("device.step", StepFile(step.step));
+    files.add("mold-top.step", StepFile(halves.top_step));
+    files.add("mold-bottom.step", StepFile(halves.bottom_step));
     moirecast_export::free_in_background(step.brep);
     let casting = report.casting.line();
     let (written, bytes) = commit_with_report(files, &report, out)?;

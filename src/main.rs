@@ -98,8 +98,9 @@ enum Command {
         #[arg(long, default_value = "127.0.0.1")]
         host: std::net::IpAddr,
     },
-    /// Build the device and its two-piece casting mold: DIR/mold-top.stl,
-    /// DIR/mold-bottom.stl, the cavity's shape as DIR/device.stl and
+    /// Build the device and its two-piece casting mold: DIR/mold-top.stl and
+    /// DIR/mold-bottom.stl, the same halves as exact B-reps DIR/mold-top.step
+    /// and DIR/mold-bottom.step, the cavity's shape as DIR/device.stl and
     /// DIR/device.step (mold frame), DIR/assembly.scad, the construction
     /// solids and DIR/report.json.
     Mold {

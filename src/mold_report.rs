@@ -194,6 +194,9 @@ pub struct MoldReport {
     /// `device.step`: the cavity's shape as an exact B-rep solid, the
     /// device's own in the mold frame.
     pub device_brep: crate::report::BrepReport,
+    /// `mold-top.step` and `mold-bottom.step`: the halves as exact B-rep
+    /// solids.
+    pub halves_brep: HalvesBrepReport,
     pub volumes: VolumeReport,
     pub casting: CastingReport,
     /// Through-holes of each half (its genus): the channels through it.
@@ -213,12 +216,47 @@ pub struct MoldReport {
     pub checks: Vec<CheckReport>,
 }
 
+/// A half's B-rep: its STEP text's size and its counts.
+#[derive(Serialize)]
+pub struct HalfBrepReport {
+    pub step_bytes: usize,
+    pub faces: usize,
+    pub edges: usize,
+    pub vertices: usize,
+    /// Faces' boundary loops beyond their first.
+    pub inner_loops: usize,
+}
+
+#[derive(Serialize)]
+pub struct HalvesBrepReport {
+    pub top: HalfBrepReport,
+    pub bottom: HalfBrepReport,
+}
+
+impl HalvesBrepReport {
+    fn of(halves: &moirecast_brep::MoldStep) -> Self {
+        let half = |b: &moirecast_brep::mold::RegionBrep, step: &moirecast_brep::StepText| {
+            HalfBrepReport {
+                step_bytes: step.len(),
+                faces: b.faces,
+                edges: b.edges,
+                vertices: b.vertices,
+                inner_loops: b.rings,
+            }
+        };
+        HalvesBrepReport {
+            top: half(&halves.top, &halves.top_step),
+            bottom: half(&halves.bottom, &halves.bottom_step),
+        }
+    }
+}
+
 pub fn mold_report(
     spec: &Spec,
     mold: &Mold,
     checks: &[CheckResult],
     files: BTreeMap<String, FileReport>,
-    device_step: &moirecast_brep::DeviceStep,
+    (device_step, halves): (&moirecast_brep::DeviceStep, &moirecast_brep::MoldStep),
 ) -> MoldReport {
     let f = &mold.features;
     let v = &mold.volumes;
@@ -240,6 +278,7 @@ pub fn mold_report(
         block_max: f.block_hi.to_array(),
         files,
         device_brep: crate::report::BrepReport::of(device_step),
+        halves_brep: HalvesBrepReport::of(halves),
         volumes: VolumeReport {
             block_mm3: v.block,
             top_mm3: v.top,

@@ -629,11 +629,13 @@ fn small_mold() -> String {
 }
 
 /// The files `moirecast mold` writes besides the construction solids.
-const MOLD_FILES: [&str; 6] = [
+const MOLD_FILES: [&str; 8] = [
     "device.stl",
     "device.step",
     "mold-top.stl",
     "mold-bottom.stl",
+    "mold-top.step",
+    "mold-bottom.step",
     "assembly.scad",
     "report.json",
 ];
@@ -658,6 +660,9 @@ fn a_small_mold_builds_with_every_file_and_check() {
         "vents-not-below-sprue",
         "f32-safe-triangles",
         "f32-distinct-vertices",
+        "mold-brep-euler",
+        "mold-brep-fit",
+        "mold-brep-channels-fit",
     ] {
         assert!(
             report.contains(&format!("\"name\": \"{name}\"")),

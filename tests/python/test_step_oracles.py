@@ -21,11 +21,11 @@ from conftest import SPECS, build, oracle
 IDS = [s.stem for s in SPECS]
 
 
-def read_step(path):
+def load_step(path):
+    """OpenCascade's shape of a STEP file, and its solids, faces and
+    validity (BRepCheck_Analyzer)."""
     oracle("OCP")
     from OCP.BRepCheck import BRepCheck_Analyzer
-    from OCP.BRepGProp import BRepGProp
-    from OCP.GProp import GProp_GProps
     from OCP.IFSelect import IFSelect_RetDone
     from OCP.STEPControl import STEPControl_Reader
     from OCP.TopAbs import TopAbs_FACE, TopAbs_SOLID
@@ -42,12 +42,21 @@ def read_step(path):
             n, _ = n + 1, e.Next()
         return n
 
-    props = GProp_GProps()
-    BRepGProp.VolumeProperties_s(shape, props)
-    return {
+    return shape, {
         "solids": count(TopAbs_SOLID),
         "faces": count(TopAbs_FACE),
         "valid": BRepCheck_Analyzer(shape).IsValid(),
+    }
+
+
+def read_step(path):
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    shape, read = load_step(path)
+    props = GProp_GProps()
+    BRepGProp.VolumeProperties_s(shape, props)
+    return read | {
         "volume": props.Mass(),
         "centre": [props.CentreOfMass().X(), props.CentreOfMass().Y(), props.CentreOfMass().Z()],
     }

@@ -97,6 +97,139 @@ pub fn device_step_mapped(
     Ok(DeviceStep { brep, step, checks })
 }
 
+/// The mold's halves as exact B-rep solids, their STEP texts, and their
+/// checks.
+pub struct MoldStep {
+    pub top: mold::RegionBrep,
+    pub bottom: mold::RegionBrep,
+    /// `mold-top.step` and `mold-bottom.step`.
+    pub top_step: StepText,
+    pub bottom_step: StepText,
+    /// `mold-brep-euler`, `mold-brep-fit` and `mold-brep-channels-fit`,
+    /// with their evidence. (A shell that is not closed is an error of
+    /// [`mold::half_brep`] itself.)
+    pub checks: Vec<CheckResult>,
+}
+
+/// Builds both halves of `mold` (of the device meshed as `dm`) as exact
+/// B-rep solids ([`mold::half_brep`]) and writes each as STEP text.
+pub fn mold_step(
+    design: &Design,
+    dm: &DeviceMesh,
+    mold: &moirecast_mold::Mold,
+) -> Result<MoldStep, BrepError> {
+    let half = |top: bool| -> Result<(mold::RegionBrep, StepText), BrepError> {
+        let b = mold::half_brep(design, dm, mold, top)?;
+        let (name, description) = if top {
+            (
+                "mold-top.step",
+                "moirecast mold: the top half, with its sprue, pour cone, vents and key sockets",
+            )
+        } else {
+            (
+                "mold-bottom.step",
+                "moirecast mold: the bottom half, with its key bumps",
+            )
+        };
+        let step = step_file_of(std::slice::from_ref(&b.solid), name, description);
+        Ok((b, step))
+    };
+    let (top, bottom) = rayon::join(|| half(true), || half(false));
+    let ((top, top_step), (bottom, bottom_step)) = (top?, bottom?);
+    let checks = mold_brep_checks(design, mold, (&top, &bottom));
+    Ok(MoldStep {
+        top,
+        bottom,
+        top_step,
+        bottom_step,
+        checks,
+    })
+}
+
+/// Facets on a full circle of the mesh halves' channels and keys.
+const CHANNEL_FACETS: f64 = 48.0;
+
+/// The checks of the halves' B-reps against their meshes.
+fn mold_brep_checks(
+    design: &Design,
+    mold: &moirecast_mold::Mold,
+    (top, bottom): (&mold::RegionBrep, &mold::RegionBrep),
+) -> Vec<CheckResult> {
+    let euler = |b: &mold::RegionBrep, genus: u32| {
+        let chi = b.vertices as i64 - b.edges as i64 + b.faces as i64 - b.rings as i64;
+        (
+            (chi - 2 * (1 - i64::from(genus))).abs(),
+            format!(
+                "V {} - E {} + F {} - inner loops {} = {chi}, genus {genus}",
+                b.vertices, b.edges, b.faces, b.rings
+            ),
+        )
+    };
+    let (et, dt) = euler(top, mold.genus_top);
+    let (eb, db) = euler(bottom, mold.genus_bottom);
+    let worst = |a: (f64, glam::DVec3), b: (f64, glam::DVec3)| if b.0 > a.0 { b } else { a };
+    let (block, block_at) = worst(
+        (top.fit.block_mm, top.fit.block_at),
+        (bottom.fit.block_mm, bottom.fit.block_at),
+    );
+    let (channels, channels_at) = worst(
+        (top.fit.channels_mm, top.fit.channels_at),
+        (bottom.fit.channels_mm, bottom.fit.channels_at),
+    );
+    // the widest channel or key, whose 48-gon's flats sag most
+    let exact = &mold.exact;
+    let widest = exact
+        .channels
+        .iter()
+        .map(|c| c.radii.0.max(c.radii.1))
+        .chain(
+            exact
+                .bumps
+                .iter()
+                .map(|b| b.bottom[0].truncate().distance(b.centre)),
+        )
+        .fold(0.0f64, f64::max);
+    let sag = widest * (1.0 - (std::f64::consts::PI / CHANNEL_FACETS).cos());
+    // f32 rounding of the mesh's vertices, a few steps at the block's extent
+    let extent = exact
+        .footprint
+        .x0
+        .abs()
+        .max(exact.footprint.x1.abs())
+        .max(exact.footprint.y0.abs())
+        .max(exact.footprint.y1.abs());
+    let f32_step = 4.0 * extent * f64::from(f32::EPSILON);
+    vec![
+        CheckResult::at_most(
+            "mold-brep-euler",
+            (et + eb) as f64,
+            0.0,
+            "",
+            format!("each half's B-rep is one closed shell; top: {dt}; bottom: {db}"),
+        ),
+        CheckResult::at_most(
+            "mold-brep-fit",
+            block,
+            design.tolerance.mm(),
+            "mm",
+            format!(
+                "worst distance of a mesh half's vertex from its B-rep face's exact surface (walls, skirt, block, and lens vertices the channels made), at ({:.3}, {:.3}, {:.3})",
+                block_at.x, block_at.y, block_at.z
+            ),
+        ),
+        CheckResult::at_most(
+            "mold-brep-channels-fit",
+            channels,
+            sag + f32_step,
+            "mm",
+            format!(
+                "worst distance of a mesh half's vertex on a channel or key from its exact cylinder or cone, at ({:.3}, {:.3}, {:.3}); the limit is the sag of the widest one's 48-gon ({sag:.6} mm) and f32 rounding",
+                channels_at.x, channels_at.y, channels_at.z
+            ),
+        ),
+    ]
+}
+
 /// The B-rep solids of a printed device's two bodies and their STEP texts.
 pub struct PrintedStep {
     pub brep: PrintedBrep,
