@@ -693,6 +693,28 @@ fn channel_edge<'s>(
         }
         _ => {}
     }
+    // planes along the axis: the side's straight generators (far from the
+    // origin f32 rounding can bend the mesh's run past `collinear`)
+    let along_axis = |n: DVec3| n.dot(fk.axis).abs() < 1e-12;
+    let line = || {
+        Ok(Curve::Line(Line(
+            point3(pts[0]),
+            point3(pts[pts.len() - 1]),
+        )))
+    };
+    match other {
+        DeviceWall(w) | Block(RegionSurface::Side(w)) if along_axis(w.outward().extend(0.0)) => {
+            return line()
+        }
+        Block(
+            RegionSurface::Cap
+            | RegionSurface::Corner(_)
+            | RegionSurface::BumpTop(_)
+            | RegionSurface::Grid,
+        ) if along_axis(DVec3::Z) => return line(),
+        ChannelEnd(j) if along_axis(channels::frame(&shapes[j]).axis) => return line(),
+        _ => {}
+    }
     // a vertical side against the runner: solved on the runner, whose
     // lines along its axis cross the vertical side at an angle
     let (k, other) = match other {
