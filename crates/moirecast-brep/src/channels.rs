@@ -15,8 +15,7 @@
 //! spacing of the mesh vertices (at most a 48th of a turn).
 
 use crate::error::BrepError;
-use crate::solid::point3;
-use crate::spline::{chord_lengths, clamped_knots, interpolate};
+use crate::solid::{cubic_through, point3};
 use glam::{DMat3, DVec3};
 use moirecast_mold::{ChannelAxis, ChannelShape};
 use truck_modeling::{
@@ -261,21 +260,18 @@ pub(crate) fn piecewise_cubic(pts: &[DVec3], breaks: &[usize]) -> Curve {
     let (mut ctrl, mut knots): (Vec<Point3>, Vec<f64>) = (Vec::new(), Vec::new());
     let mut offset = 0.0;
     for (i, w) in bounds.windows(2).enumerate() {
-        let piece = &pts[w[0]..=w[1]];
-        let s: Vec<f64> = chord_lengths(piece).iter().map(|t| t + offset).collect();
-        let data: Vec<[f64; 3]> = piece.iter().map(|p| p.to_array()).collect();
-        let c = interpolate(&s, &data);
-        let k: Vec<f64> = clamped_knots(&s).into_iter().copied().collect();
+        let piece = cubic_through(&pts[w[0]..=w[1]], |p| p);
+        let k: Vec<f64> = piece.knot_vec().iter().map(|t| t + offset).collect();
         if i == 0 {
-            ctrl.extend(c.iter().map(|&c| point3(DVec3::from_array(c))));
+            ctrl.extend(piece.control_points());
             knots.extend(&k[..k.len() - 1]);
         } else {
             // the shared end is the last piece's last point: drop its copy,
             // and one of the join knot's four copies
-            ctrl.extend(c.iter().skip(1).map(|&c| point3(DVec3::from_array(c))));
+            ctrl.extend(piece.control_points().iter().skip(1));
             knots.extend(&k[4..k.len() - 1]);
         }
-        offset = s[s.len() - 1];
+        offset = k[k.len() - 1];
     }
     knots.push(offset);
     Curve::BSplineCurve(BSplineCurve::new(KnotVec::from(knots), ctrl))

@@ -23,9 +23,10 @@
 use crate::channels;
 use crate::error::BrepError;
 use crate::solid::{
-    assemble, closed_solid, crease_curve, face_facing, lens_families, point3, surface_face,
+    assemble, closed_solid, crease_curve, cubic_through, face_facing, lens_families, point3,
+    surface_face,
 };
-use crate::spline::{chord_lengths, clamped_knots, interpolate};
+use crate::spline::chord_lengths;
 use crate::topology::{pieces, Piece, Run};
 use glam::{DAffine3, DVec3};
 use moirecast_kernel::mesher::Patch;
@@ -442,19 +443,6 @@ fn onto(rect: &Rect, wall: Wall, p: DVec3) -> DVec3 {
     }
 }
 
-/// The C² cubic through `pts` (in order), each put into the plane of
-/// `wall` of `rect`.
-fn cubic_in_wall(rect: &Rect, wall: Wall, pts: &[DVec3]) -> BSplineCurve<Point3> {
-    let pts: Vec<DVec3> = pts.iter().map(|&p| onto(rect, wall, p)).collect();
-    let s = chord_lengths(&pts);
-    let data: Vec<[f64; 3]> = pts.iter().map(|p| p.to_array()).collect();
-    let ctrl: Vec<Point3> = interpolate(&s, &data)
-        .into_iter()
-        .map(|c| point3(onto(rect, wall, DVec3::from_array(c))))
-        .collect();
-    BSplineCurve::new(clamped_knots(&s), ctrl)
-}
-
 /// The mid curve of `wall`: the polyline (a B-spline of degree 1) of the
 /// mid-wall points, in increasing along-coordinate, read off the edge
 /// between the wall's skirt and the block's side (the mid curve carried
@@ -611,7 +599,9 @@ fn edge_curve<'s>(
             Ok(Curve::BSplineCurve(crease_curve(surface, t, a.y, b.y)))
         }
         (Lens(_), DeviceWall(w)) | (DeviceWall(w), Lens(_)) => {
-            Ok(Curve::BSplineCurve(cubic_in_wall(&frame.outline, w, &pts)))
+            Ok(Curve::BSplineCurve(cubic_through(&pts, |p| {
+                onto(&frame.outline, w, p)
+            })))
         }
         (DeviceWall(w), Block(RegionSurface::Skirt(_)))
         | (Block(RegionSurface::Skirt(_)), DeviceWall(w)) => {
@@ -972,6 +962,16 @@ mod tests {
         }
     }
 
+    /// A 10 × 8 mm cylinder's design (lenses of 0.5 mm) and its device mesh.
+    fn small_cylinder() -> (Design, DeviceMesh) {
+        let mut params =
+            DesignParams::with_defaults(PitchSurface::Cylinder { radius: -40.0 }, 10.0, 8.0, 0.5);
+        params.tolerance = 0.01;
+        let design = Design::new(params).unwrap();
+        let dm = mesh_device(&design, &Silent).unwrap();
+        (design, dm)
+    }
+
     /// Both parting regions of a small cylinder's device, flipped and not,
     /// the lower one with a key's bump on each corner square: each B-rep
     /// is one closed shell of genus 0 (V − E + F − rings = 2) with the faces the
@@ -982,11 +982,7 @@ mod tests {
     /// differ by less. (Coarser tessellations miss by more than that.)
     #[test]
     fn a_plain_region_is_one_closed_exact_solid() {
-        let mut params =
-            DesignParams::with_defaults(PitchSurface::Cylinder { radius: -40.0 }, 10.0, 8.0, 0.5);
-        params.tolerance = 0.01;
-        let design = Design::new(params).unwrap();
-        let dm = mesh_device(&design, &Silent).unwrap();
+        let (design, dm) = small_cylinder();
         let device = crate::build_brep(&design, &dm).unwrap().stats;
         for flip in [false, true] {
             let posed = PosedDevice::new(&design, &dm, flip, 1.0).unwrap();
@@ -1065,11 +1061,7 @@ mod tests {
     /// texts pass the halves' checks, are deterministic, and read back.
     #[test]
     fn the_cut_halves_are_closed_exact_solids() {
-        let mut params =
-            DesignParams::with_defaults(PitchSurface::Cylinder { radius: -40.0 }, 10.0, 8.0, 0.5);
-        params.tolerance = 0.01;
-        let design = Design::new(params).unwrap();
-        let dm = mesh_device(&design, &Silent).unwrap();
+        let (design, dm) = small_cylinder();
         let mold = moirecast_mold::build_mold(
             &design,
             &dm,

@@ -397,17 +397,27 @@ pub(crate) fn crease_curve(
     piece_curve
 }
 
-/// A trim, where a wall cuts a surface: the C² cubic through the exact
-/// intersection points `pts` (in order), flattened into the wall's plane.
-pub(crate) fn trim_curve(design: &Design, side: Side, pts: &[DVec3]) -> Curve {
-    let pts: Vec<DVec3> = pts.iter().map(|&p| onto_wall(design, side, p)).collect();
+/// The C² cubic through `pts` (in order, at chord-length parameters from
+/// 0), its points and control points put through `flatten` (into a plane
+/// the curve must lie in, or left as they are).
+pub(crate) fn cubic_through(
+    pts: &[DVec3],
+    flatten: impl Fn(DVec3) -> DVec3,
+) -> BSplineCurve<Point3> {
+    let pts: Vec<DVec3> = pts.iter().map(|&p| flatten(p)).collect();
     let s = chord_lengths(&pts);
     let data: Vec<[f64; 3]> = pts.iter().map(|p| p.to_array()).collect();
     let ctrl: Vec<Point3> = interpolate(&s, &data)
         .into_iter()
-        .map(|c| point3(onto_wall(design, side, DVec3::from_array(c))))
+        .map(|c| point3(flatten(DVec3::from_array(c))))
         .collect();
-    Curve::BSplineCurve(BSplineCurve::new(clamped_knots(&s), ctrl))
+    BSplineCurve::new(clamped_knots(&s), ctrl)
+}
+
+/// A trim, where a wall cuts a surface: the C² cubic through the exact
+/// intersection points `pts` (in order), flattened into the wall's plane.
+pub(crate) fn trim_curve(design: &Design, side: Side, pts: &[DVec3]) -> Curve {
+    Curve::BSplineCurve(cubic_through(pts, |p| onto_wall(design, side, p)))
 }
 
 /// The planar face of a wall, outward.
