@@ -464,7 +464,7 @@ pub fn run_mold(
     let (((device_checks, device), encoded), halves) = rayon::join(
         || {
             rayon::join(
-                || SolidMesh::validate(&mold.device),
+                || SolidMesh::validate(mold.device()),
                 || {
                     jobs.par_iter()
                         .map(|(name, job)| encoded_stl(name, job))
@@ -530,7 +530,7 @@ pub fn run_mold(
         warnings: mold.features.warnings.clone(),
         volumes: mold.volumes,
         triangles: [
-            mold.device.triangles.len(),
+            mold.device().triangles.len(),
             mold.top.mesh().triangles.len(),
             mold.bottom.mesh().triangles.len(),
         ],

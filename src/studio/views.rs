@@ -79,7 +79,7 @@ impl MoldView {
                 }
             }
         };
-        let (device_checks, device) = SolidMesh::validate(&mold.device);
+        let (device_checks, device) = SolidMesh::validate(mold.device());
         refuse_failed(&device_checks)?;
         Ok(MoldView {
             top: half("mold-top.stl", &mold.top)?,

@@ -49,8 +49,6 @@ use parting::{Face, HeightQuery, PosedDevice};
 
 /// A built mold, measured.
 pub struct Mold {
-    /// The cavity's shape: the device in the mold frame (flipped, scaled).
-    pub device: Mesh,
     /// The halves, with the solid checks they passed as they were cut.
     pub top: CheckedMesh,
     pub bottom: CheckedMesh,
@@ -70,6 +68,13 @@ pub struct Mold {
     pub construction: Vec<ConstructionSolid>,
     /// What the halves' exact B-rep is built from.
     pub exact: ExactParts,
+}
+
+impl Mold {
+    /// The cavity's shape: the device in the mold frame (flipped, scaled).
+    pub fn device(&self) -> &Mesh {
+        &self.exact.posed.mesh
+    }
 }
 
 /// What the halves' exact B-rep is built from: the posed device, each
@@ -261,7 +266,6 @@ fn assemble(
     let mut features = f;
     features.warnings.extend(cut.turned_note);
     Mold {
-        device: exact.posed.mesh.clone(),
         top: cut.top.solid,
         bottom: cut.bottom.solid,
         features,
