@@ -20,7 +20,7 @@ use glam::{DMat3, DVec3};
 use moirecast_mold::{ChannelAxis, ChannelShape};
 use truck_modeling::{
     BSplineCurve, Curve, KnotVec, Line, NurbsCurve, NurbsSurface, ParametricSurface,
-    ParametricSurface3D, Point3, RevolutedCurve, SearchNearestParameter, Vector3, Vector4,
+    ParametricSurface3D, RevolutedCurve, SearchNearestParameter, Vector3, Vector4,
 };
 
 /// A channel's frame: a point of its axis (position 0), the axis's unit
@@ -121,7 +121,12 @@ pub(crate) fn natural_is_outward(
 /// unit directions `e1` and `e2` through `pts` (in order, near that
 /// circle), from the first point's angle to the last's: rational quadratic
 /// pieces of at most a quarter turn.
-pub(crate) fn circle_arc(centre: DVec3, (e1, e2): (DVec3, DVec3), r: f64, pts: &[DVec3]) -> Curve {
+pub(crate) fn circle_arc(
+    centre: DVec3,
+    (e1, e2): (DVec3, DVec3),
+    r: f64,
+    pts: &[DVec3],
+) -> NurbsCurve<Vector4> {
     let angle = |p: DVec3| (p - centre).dot(e2).atan2((p - centre).dot(e1));
     // unwrapped: each step between neighbours is the short way round
     let start = angle(pts[0]);
@@ -151,17 +156,79 @@ pub(crate) fn circle_arc(centre: DVec3, (e1, e2): (DVec3, DVec3), r: f64, pts: &
             vec![k, k]
         });
     }
-    Curve::NurbsCurve(NurbsCurve::new(BSplineCurve::new(
-        KnotVec::from(knots),
-        ctrl,
-    )))
+    NurbsCurve::new(BSplineCurve::new(KnotVec::from(knots), ctrl))
+}
+
+/// `arc` (in a horizontal plane) lifted onto the plane z = `z`(x, y), an
+/// affine function: x and y stay, so the image is exact, and an affine map
+/// of a rational curve is the rational curve of its mapped control points
+/// with their weights.
+pub(crate) fn lifted_arc(
+    arc: NurbsCurve<Vector4>,
+    z: impl Fn(DVec3) -> f64,
+) -> NurbsCurve<Vector4> {
+    let curve = arc.into_non_rationalized();
+    let ctrl = curve
+        .control_points()
+        .iter()
+        .map(|c| {
+            let p = DVec3::new(c.x / c.w, c.y / c.w, 0.0);
+            Vector4::new(c.x, c.y, z(p) * c.w, c.w)
+        })
+        .collect();
+    NurbsCurve::new(BSplineCurve::new(curve.knot_vec().clone(), ctrl))
+}
+
+/// Rational pieces of one degree, each ending where the next starts,
+/// joined C⁰ into one curve ([`join_end_to_end`]).
+pub(crate) fn join_arcs(arcs: Vec<NurbsCurve<Vector4>>) -> Curve {
+    let degree = arcs[0].degree();
+    let (knots, ctrl) = join_end_to_end(
+        arcs.into_iter().map(|a| {
+            let b = a.into_non_rationalized();
+            (b.knot_vec().to_vec(), b.control_points().clone())
+        }),
+        degree,
+    );
+    Curve::NurbsCurve(NurbsCurve::new(BSplineCurve::new(knots, ctrl)))
+}
+
+/// Clamped pieces of one `degree` (knots, control points), each starting
+/// at the last one's end point, as one B-spline's knots and control points,
+/// C⁰ at the joins: each piece's knots shifted to start where the last
+/// ended, its first control point (the shared end) and one of its join
+/// knot's copies dropped.
+fn join_end_to_end<P: Copy>(
+    pieces: impl IntoIterator<Item = (Vec<f64>, Vec<P>)>,
+    degree: usize,
+) -> (KnotVec, Vec<P>) {
+    let (mut ctrl, mut knots) = (Vec::new(), Vec::new());
+    let mut offset = 0.0;
+    for (i, (k, c)) in pieces.into_iter().enumerate() {
+        let k: Vec<f64> = k.iter().map(|t| t - k[0] + offset).collect();
+        if i == 0 {
+            ctrl.extend(c);
+            knots.extend(&k[..k.len() - 1]);
+        } else {
+            ctrl.extend(c.into_iter().skip(1));
+            knots.extend(&k[degree + 1..k.len() - 1]);
+        }
+        offset = k[k.len() - 1];
+    }
+    knots.push(offset);
+    (KnotVec::from(knots), ctrl)
 }
 
 /// The circle where `c`'s side crosses the plane across its axis at
 /// position `h`, as an arc through `pts`.
 pub(crate) fn section_arc(c: &ChannelShape, h: f64, pts: &[DVec3]) -> Curve {
     let f = frame(c);
-    circle_arc(f.origin + h * f.axis, (f.e1, f.e2), radius_at(c, h), pts)
+    Curve::NurbsCurve(circle_arc(
+        f.origin + h * f.axis,
+        (f.e1, f.e2),
+        radius_at(c, h),
+        pts,
+    ))
 }
 
 /// A surface a channel's edge is solved onto.
@@ -257,22 +324,12 @@ pub(crate) fn piecewise_cubic(pts: &[DVec3], breaks: &[usize]) -> Curve {
     let mut bounds = vec![0];
     bounds.extend(cuts);
     bounds.push(pts.len() - 1);
-    let (mut ctrl, mut knots): (Vec<Point3>, Vec<f64>) = (Vec::new(), Vec::new());
-    let mut offset = 0.0;
-    for (i, w) in bounds.windows(2).enumerate() {
-        let piece = cubic_through(&pts[w[0]..=w[1]], |p| p);
-        let k: Vec<f64> = piece.knot_vec().iter().map(|t| t + offset).collect();
-        if i == 0 {
-            ctrl.extend(piece.control_points());
-            knots.extend(&k[..k.len() - 1]);
-        } else {
-            // the shared end is the last piece's last point: drop its copy,
-            // and one of the join knot's four copies
-            ctrl.extend(piece.control_points().iter().skip(1));
-            knots.extend(&k[4..k.len() - 1]);
-        }
-        offset = k[k.len() - 1];
-    }
-    knots.push(offset);
-    Curve::BSplineCurve(BSplineCurve::new(KnotVec::from(knots), ctrl))
+    let (knots, ctrl) = join_end_to_end(
+        bounds.windows(2).map(|w| {
+            let piece = cubic_through(&pts[w[0]..=w[1]], |p| p);
+            (piece.knot_vec().to_vec(), piece.control_points().clone())
+        }),
+        3,
+    );
+    Curve::BSplineCurve(BSplineCurve::new(knots, ctrl))
 }

@@ -235,14 +235,21 @@ impl<'a> TriangleGrid<'a> {
 /// The largest distance from the vertices and triangle centroids of `from`
 /// to the mesh `to`, and where it is.
 pub fn one_sided_distance(from: &Mesh, to: &Mesh) -> (f64, DVec3) {
+    let centroids = from
+        .triangles
+        .iter()
+        .map(|t| t.map(|v| from.positions[v as usize]))
+        .map(|[a, b, c]| (a + b + c) / 3.0);
+    let samples: Vec<DVec3> = from.positions.iter().copied().chain(centroids).collect();
+    farthest_from(&samples, to)
+}
+
+/// The largest distance from the points `samples` to the mesh `to`, and
+/// which point it is (the least in x, y, z among equals, so the answer is
+/// deterministic).
+pub fn farthest_from(samples: &[DVec3], to: &Mesh) -> (f64, DVec3) {
     let grid = TriangleGrid::new(to);
-    let samples = from.positions.par_iter().copied().chain(
-        from.triangles
-            .par_iter()
-            .map(|t| t.map(|v| from.positions[v as usize]))
-            .map(|[a, b, c]| (a + b + c) / 3.0),
-    );
-    samples.map(|p| (grid.distance(p), p)).reduce(
+    samples.par_iter().map(|&p| (grid.distance(p), p)).reduce(
         || (0.0, DVec3::ZERO),
         |a, b| {
             if b.0 > a.0 || (b.0 == a.0 && b.1.to_array() < a.1.to_array()) {

@@ -744,6 +744,11 @@ fn channel_edge<'s>(
                 })
                 .map(|(i, _)| i)
                 .collect();
+            if vertical(k) && shape.radii.0 == shape.radii.1 {
+                if let Some(curve) = skirt_ellipse(shape, w, &knees, pts, &breaks) {
+                    return Ok(curve);
+                }
+            }
             Box::new(move |x: DVec3| x.z - polyline_z(&knees, w.along(x)))
         }
         Block(
@@ -768,6 +773,94 @@ fn channel_edge<'s>(
         .map(|&p| channels::solve_on_side(shape, &f, &channels::Other::Implicit(&*implicit), p))
         .collect::<Result<Vec<_>, _>>()?;
     Ok(channels::piecewise_cubic(&solved, &breaks))
+}
+
+/// Where a vertical cylinder `shape` crosses wall `w`'s skirt along the
+/// mesh points `pts`, broken at `breaks` (the points on the skirt's knees):
+/// exact ellipse arcs. Each strip of the skirt between two knees is a
+/// plane, and lifting the plane z = 0 onto it keeps x and y, an affine map,
+/// so the circle of the side lifted onto the strip is the exact curve
+/// where the two meet ([`channels::lifted_arc`]). The arcs meet at the
+/// circle's exact crossings with the knee lines. `None` where a piece of
+/// `pts` does not lie on one strip (left to the solved cubic).
+fn skirt_ellipse(
+    shape: &ChannelShape,
+    w: Wall,
+    knees: &[(f64, f64)],
+    pts: &[DVec3],
+    breaks: &[usize],
+) -> Option<Curve> {
+    let f = channels::frame(shape);
+    let r = shape.radii.0;
+    let along_axis = match w {
+        Wall::XMin | Wall::XMax => DVec3::Y,
+        Wall::YMin | Wall::YMax => DVec3::X,
+    };
+    let across = DVec3::Z.cross(along_axis);
+    let centre = DVec3::new(f.origin.x, f.origin.y, 0.0);
+    // the circle's point on knee line `a` nearest `p`
+    let on_knee = |a: f64, p: DVec3| {
+        let d = a - w.along(centre);
+        let s = (r * r - d * d).max(0.0).sqrt();
+        let side = if (p - centre).dot(across) >= 0.0 {
+            s
+        } else {
+            -s
+        };
+        centre + d * along_axis + side * across
+    };
+    let knee_near = |t: f64| {
+        knees
+            .iter()
+            .map(|&(a, _)| a)
+            .min_by(|x, y| (x - t).abs().total_cmp(&(y - t).abs()))
+    };
+    let mut bounds: Vec<usize> = breaks
+        .iter()
+        .copied()
+        .filter(|&i| i > 0 && i + 1 < pts.len())
+        .collect();
+    bounds.sort_unstable();
+    bounds.dedup();
+    bounds.insert(0, 0);
+    bounds.push(pts.len() - 1);
+    let mut arcs = Vec::new();
+    for (n, pair) in bounds.windows(2).enumerate() {
+        let mut piece = pts[pair[0]..=pair[1]].to_vec();
+        let last = piece.len() - 1;
+        if n > 0 {
+            piece[0] = on_knee(knee_near(w.along(piece[0]))?, piece[0]);
+        }
+        if n + 2 < bounds.len() {
+            piece[last] = on_knee(knee_near(w.along(piece[last]))?, piece[last]);
+        }
+        // the strip holding the piece: z = z0 + slope (along - a0)
+        let mid = w.along(piece[last / 2]);
+        let i = knees.partition_point(|&(a, _)| a <= mid);
+        let (a_lo, a_hi, z0, slope) = if i == 0 {
+            (f64::NEG_INFINITY, knees[0].0, knees[0].1, 0.0)
+        } else if i == knees.len() {
+            (knees[i - 1].0, f64::INFINITY, knees[i - 1].1, 0.0)
+        } else {
+            let ((a0, z0), (a1, z1)) = (knees[i - 1], knees[i]);
+            (
+                a0,
+                a1,
+                z0 - (z1 - z0) / (a1 - a0) * a0,
+                (z1 - z0) / (a1 - a0),
+            )
+        };
+        let slack = 1e-6;
+        if piece
+            .iter()
+            .any(|&p| w.along(p) < a_lo - slack || w.along(p) > a_hi + slack)
+        {
+            return None;
+        }
+        let arc = channels::circle_arc(centre, (DVec3::X, DVec3::Y), r, &piece);
+        arcs.push(channels::lifted_arc(arc, |p| z0 + slope * w.along(p)));
+    }
+    Some(channels::join_arcs(arcs))
 }
 
 /// The height of the polyline `knees` ((along, z), in increasing along) at
@@ -931,7 +1024,12 @@ fn arc(bump: &Bump, pts: &[DVec3]) -> Curve {
     let (a, b) = (bump.bottom[0], bump.top[0]);
     let along = (z - a.z) / (b.z - a.z);
     let r = (a + along * (b - a)).truncate().distance(bump.centre);
-    channels::circle_arc(bump.centre.extend(z), (DVec3::X, DVec3::Y), r, pts)
+    Curve::NurbsCurve(channels::circle_arc(
+        bump.centre.extend(z),
+        (DVec3::X, DVec3::Y),
+        r,
+        pts,
+    ))
 }
 
 #[cfg(test)]
