@@ -663,6 +663,8 @@ fn a_small_mold_builds_with_every_file_and_check() {
         "mold-brep-euler",
         "mold-brep-fit",
         "mold-brep-channels-fit",
+        "mold-brep-samples-fit",
+        "mold-brep-channel-samples-fit",
     ] {
         assert!(
             report.contains(&format!("\"name\": \"{name}\"")),

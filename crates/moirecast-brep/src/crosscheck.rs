@@ -110,7 +110,7 @@ pub fn weld(mesh: &Mesh, distance: f64) -> Mesh {
 
 /// Triangles of a mesh bucketed on a dense uniform grid (compressed rows),
 /// for closest-point queries.
-struct TriangleGrid<'a> {
+pub(crate) struct TriangleGrid<'a> {
     mesh: &'a Mesh,
     lo: DVec3,
     cell: f64,
@@ -126,7 +126,7 @@ const TRIANGLES_PER_CELL: f64 = 8.0;
 const MAX_CELLS: f64 = 3.0e7;
 
 impl<'a> TriangleGrid<'a> {
-    fn new(mesh: &'a Mesh) -> Self {
+    pub(crate) fn new(mesh: &'a Mesh) -> Self {
         let (lo, hi) = mesh.bounds();
         let size = (hi - lo).max(DVec3::splat(1e-9));
         let cell = (TRIANGLES_PER_CELL * mesh.area() / mesh.triangles.len().max(1) as f64)
@@ -183,7 +183,7 @@ impl<'a> TriangleGrid<'a> {
 
     /// Distance from `p` to the mesh: rings of cells outwards, skipping
     /// cells farther than the best distance found so far.
-    fn distance(&self, p: DVec3) -> f64 {
+    pub(crate) fn distance(&self, p: DVec3) -> f64 {
         let rel = (p - self.lo) / self.cell;
         let c = rel.floor().as_i64vec3();
         let dims = self.dims.map(|d| d as i64);

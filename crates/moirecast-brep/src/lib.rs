@@ -105,8 +105,9 @@ pub struct MoldStep {
     /// `mold-top.step` and `mold-bottom.step`.
     pub top_step: StepText,
     pub bottom_step: StepText,
-    /// `mold-brep-euler`, `mold-brep-fit` and `mold-brep-channels-fit`,
-    /// with their evidence. (A shell that is not closed is an error of
+    /// `mold-brep-euler`, `mold-brep-fit`, `mold-brep-channels-fit`,
+    /// `mold-brep-samples-fit` and `mold-brep-channel-samples-fit`, with
+    /// their evidence. (A shell that is not closed is an error of
     /// [`mold::half_brep`] itself.)
     pub checks: Vec<CheckResult>,
 }
@@ -167,15 +168,21 @@ fn mold_brep_checks(
     };
     let (et, dt) = euler(top, mold.genus_top);
     let (eb, db) = euler(bottom, mold.genus_bottom);
-    let worst = |a: (f64, glam::DVec3), b: (f64, glam::DVec3)| if b.0 > a.0 { b } else { a };
-    let (block, block_at) = worst(
-        (top.fit.block_mm, top.fit.block_at),
-        (bottom.fit.block_mm, bottom.fit.block_at),
-    );
-    let (channels, channels_at) = worst(
-        (top.fit.channels_mm, top.fit.channels_at),
-        (bottom.fit.channels_mm, bottom.fit.channels_at),
-    );
+    // the worse half's measure
+    let worst = |of: fn(&mold::Fit) -> (f64, glam::DVec3)| {
+        let (a, b) = (of(&top.fit), of(&bottom.fit));
+        if b.0 > a.0 {
+            b
+        } else {
+            a
+        }
+    };
+    let (block, block_at) = worst(|f| (f.block_mm, f.block_at));
+    let (channels, channels_at) = worst(|f| (f.channels_mm, f.channels_at));
+    let (samples, samples_at) = worst(|f| (f.samples_mm, f.samples_at));
+    let (channel_samples, channel_samples_at) =
+        worst(|f| (f.channel_samples_mm, f.channel_samples_at));
+    let sampled = top.fit.samples + bottom.fit.samples;
     // the widest channel or key, whose 48-gon's flats sag most
     let exact = &mold.exact;
     let widest = exact
@@ -225,6 +232,26 @@ fn mold_brep_checks(
             format!(
                 "worst distance of a mesh half's vertex on a channel or key from its exact cylinder or cone, at ({:.3}, {:.3}, {:.3}); the limit is the sag of the widest one's 48-gon ({sag:.6} mm) and f32 rounding",
                 channels_at.x, channels_at.y, channels_at.z
+            ),
+        ),
+        CheckResult::at_most(
+            "mold-brep-samples-fit",
+            samples,
+            design.tolerance.mm() + f32_step,
+            "mm",
+            format!(
+                "worst distance from the mesh half of {sampled} points sampled on both halves' B-rep faces (each mesh triangle's centroid carried onto its face's exact surface, and points along every edge's curve; off the channels and keys), at ({:.3}, {:.3}, {:.3}); the limit is the tolerance and the f32 rounding of the half's vertices",
+                samples_at.x, samples_at.y, samples_at.z
+            ),
+        ),
+        CheckResult::at_most(
+            "mold-brep-channel-samples-fit",
+            channel_samples,
+            sag + design.tolerance.mm() + f32_step,
+            "mm",
+            format!(
+                "the same on the channels' and keys' sides and ends, at ({:.3}, {:.3}, {:.3}); the limit is the widest 48-gon's sag, the tolerance (an edge where a channel meets a lens is within the sag of one and the tolerance of the other) and f32 rounding",
+                channel_samples_at.x, channel_samples_at.y, channel_samples_at.z
             ),
         ),
     ]

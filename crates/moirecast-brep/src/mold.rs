@@ -29,6 +29,7 @@ use crate::solid::{
 use crate::spline::chord_lengths;
 use crate::topology::{pieces, Piece, Run};
 use glam::{DAffine3, DVec3};
+use moirecast_kernel::measure::{closest_on_segment, closest_on_triangle};
 use moirecast_kernel::mesher::Patch;
 use moirecast_kernel::model::LensRef;
 use moirecast_kernel::Mesh;
@@ -71,11 +72,12 @@ pub struct RegionBrep {
     pub fit: Fit,
 }
 
-/// How far a region's or half's mesh vertices lie from the exact surface
-/// of the B-rep face they are on: the faces sampled at the vertices' feet.
-/// Vertices the device mesher placed on a lens are left out: their
-/// distance from the lens's NURBS surface is the device B-rep's
-/// `brep-surface-fit`, measured there.
+/// How far a region's or half's mesh lies from its B-rep, both ways: its
+/// vertices from the exact surface of the face they are on (the faces
+/// sampled at the vertices' feet), and points sampled on the faces from
+/// the mesh. Vertices the device mesher placed on a lens, and triangles
+/// with only such vertices, are left out: their distance from the lens's
+/// NURBS surface is the device B-rep's `brep-surface-fit`, measured there.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Fit {
     /// The worst distance (mm) on the device's walls and the new lens
@@ -87,6 +89,17 @@ pub struct Fit {
     /// the mesh is a 48-gon, and where it is.
     pub channels_mm: f64,
     pub channels_at: DVec3,
+    /// How many points were sampled on the faces: each mesh triangle's
+    /// centroid carried onto its face's exact surface, and points along
+    /// every edge's curve.
+    pub samples: usize,
+    /// The worst distance (mm) of a sampled point off the channels and
+    /// keys from the mesh, and where it is.
+    pub samples_mm: f64,
+    pub samples_at: DVec3,
+    /// The same on the channels' and keys' sides and ends.
+    pub channel_samples_mm: f64,
+    pub channel_samples_at: DVec3,
 }
 
 /// The region's geometry beside its mesh: where its planes lie.
@@ -114,6 +127,10 @@ pub(crate) fn matrix_of(map: DAffine3) -> Matrix4 {
         1.0,
     )
 }
+
+/// An edge's curve, the mesh run it was built along, and whether it bounds
+/// a channel's or key's side or end.
+type BuiltEdge = (Vec<u32>, Curve, bool);
 
 /// The posed device's vertex a region's or half's vertex is, if it is one.
 type DeviceVertex<'a> = &'a (dyn Fn(u32) -> Option<u32> + Sync);
@@ -288,12 +305,15 @@ fn build<'a>(
         .map(|&w| Some((w, mid_curve(&frame, &pieces, w)?)))
         .collect::<Option<_>>()
         .ok_or_else(|| BrepError::Topology("a wall has no mid curve".into()))?;
+    // every edge's curve, the mesh run it was built along, and whether it
+    // bounds a channel's or key's side or end
+    let mut built_edges: Vec<BuiltEdge> = Vec::new();
     let assembled = assemble(
         &pieces,
         &mesh.positions,
         |piece| !matches!(piece.patch, RegionFace::Lens(_)),
         |piece, other, run| {
-            edge_curve(
+            let curve = edge_curve(
                 &frame,
                 (piece.patch, other.patch),
                 run,
@@ -305,7 +325,18 @@ fn build<'a>(
                     Ok((a, b, &posed_surfaces[&lens]))
                 },
                 &mid_curves,
-            )
+            )?;
+            let on_channel = |f: RegionFace| {
+                matches!(
+                    f,
+                    RegionFace::ChannelSide(..)
+                        | RegionFace::ChannelEnd(_)
+                        | RegionFace::Block(RegionSurface::BumpSide(..))
+                )
+            };
+            let channel = on_channel(piece.patch) || on_channel(other.patch);
+            built_edges.push((run.vertices.clone(), curve.clone(), channel));
+            Ok(curve)
         },
         |piece, wires| make_face(&frame, piece, wires, &params, &posed_surfaces, &mid_curves),
     )?;
@@ -317,6 +348,7 @@ fn build<'a>(
         &frame,
         &mid_curves,
         (&posed_surfaces, device_vertex),
+        (&built_edges, design.tolerance.mm()),
     );
     Ok(RegionBrep {
         solid,
@@ -329,13 +361,16 @@ fn build<'a>(
 }
 
 /// [`Fit`]: each triangle's vertices against the exact surface of its
-/// label. A plane known only from the mesh (a corner square, a bump's top,
-/// a channel's end) is the one through the first vertex of that label.
+/// label, and points sampled on the B-rep's faces and on its `edges`
+/// (each curve with the mesh run it was built along) against the mesh. A
+/// plane known only from the mesh (a corner square, a bump's top, a
+/// channel's end) is the one through the first vertex of that label.
 fn fit(
     (mesh, labels): (&Mesh, &[RegionFace]),
     frame: &Frame,
     mids: &HashMap<Wall, BSplineCurve<Point3>>,
     (surfaces, device_vertex): (&HashMap<LensRef, NurbsSurface<Vector4>>, DeviceVertex<'_>),
+    (edges, tolerance): (&[BuiltEdge], f64),
 ) -> Fit {
     let mut first_at: HashMap<RegionFace, DVec3> = HashMap::new();
     for (t, &label) in labels.iter().enumerate() {
@@ -354,23 +389,20 @@ fn fit(
             (w, k)
         })
         .collect();
-    // (distance, is on a channel), or None where the device B-rep measures it
-    let off = |label: RegionFace, v: u32| -> Option<(f64, bool)> {
-        let p = mesh.positions[v as usize];
-        let plane_z = |z: f64| Some(((p.z - z).abs(), false));
+    // the point of `label`'s exact surface that `p` is measured against,
+    // and whether it is a channel's or key's (None on the device's floor)
+    let foot = |label: RegionFace, p: DVec3| -> Option<(DVec3, bool)> {
+        let plane_z = |z: f64| Some((DVec3::new(p.x, p.y, z), false));
         match label {
             RegionFace::Lens(lens) => {
-                if device_vertex(v).is_some() {
-                    return None;
-                }
                 let s = &surfaces[&lens];
                 let (u, w) = s.search_nearest_parameter(point3(p), None, 100)?;
                 let q = s.subs(u, w);
-                Some((p.distance(DVec3::new(q.x, q.y, q.z)), false))
+                Some((DVec3::new(q.x, q.y, q.z), false))
             }
-            RegionFace::Wall(w) => Some((p.distance(onto(&frame.outline, w, p)), false)),
+            RegionFace::Wall(w) => Some((onto(&frame.outline, w, p), false)),
             RegionFace::Block(RegionSurface::Side(w)) => {
-                Some((p.distance(onto(&frame.footprint, w, p)), false))
+                Some((onto(&frame.footprint, w, p), false))
             }
             RegionFace::Block(RegionSurface::Cap) => plane_z(frame.cap_z),
             RegionFace::Block(RegionSurface::Skirt(w)) => {
@@ -380,39 +412,30 @@ fn fit(
                 RegionSurface::Corner(_) | RegionSurface::BumpTop(_) | RegionSurface::Grid,
             ) => plane_z(first_at[&label].z),
             RegionFace::Block(RegionSurface::BumpSide(k, _)) => {
-                let bump = frame.bumps.get(&k)?;
-                let (a, b) = (bump.bottom[0], bump.top[0]);
-                let along = (p.z - a.z) / (b.z - a.z);
-                let r = (a + along * (b - a)).truncate().distance(bump.centre);
-                Some(((p.truncate().distance(bump.centre) - r).abs(), true))
+                let centre = frame.bumps.get(&k)?.centre.extend(p.z);
+                let radial = (p - centre).normalize_or_zero();
+                Some((centre + bump_radius(frame.bumps[&k], p.z) * radial, true))
             }
             RegionFace::Block(RegionSurface::Device) => None,
             RegionFace::ChannelSide(k, _) => {
                 let c = &frame.channels[k];
                 let f = channels::frame(c);
-                Some((
-                    (f.distance(p) - channels::radius_at(c, f.along(p))).abs(),
-                    true,
-                ))
+                let axis = f.origin + f.along(p) * f.axis;
+                let radial = (p - axis).normalize_or_zero();
+                Some((axis + channels::radius_at(c, f.along(p)) * radial, true))
             }
             RegionFace::ChannelEnd(k) => {
                 let f = channels::frame(&frame.channels[k]);
-                Some(((f.along(p) - f.along(first_at[&label])).abs(), true))
+                let h = f.along(p) - f.along(first_at[&label]);
+                Some((p - h * f.axis, true))
             }
         }
     };
     let worst = |a: (f64, DVec3), b: (f64, DVec3)| if b.0 > a.0 { b } else { a };
-    let ((block_mm, block_at), (channels_mm, channels_at)) = mesh
-        .triangles
-        .par_iter()
-        .zip(labels)
-        .flat_map_iter(|(t, &label)| t.map(|v| (label, v)))
-        .filter_map(|(label, v)| {
-            let (d, channel) = off(label, v)?;
-            Some((d, channel, mesh.positions[v as usize]))
-        })
-        .fold(
-            || ((0.0, DVec3::ZERO), (0.0, DVec3::ZERO)),
+    // (distance, on a channel, where), folded into the worst of each kind
+    let fold = |items: Vec<(f64, bool, DVec3)>| {
+        items.into_iter().fold(
+            ((0.0, DVec3::ZERO), (0.0, DVec3::ZERO)),
             |(b, c), (d, channel, p)| {
                 if channel {
                     (b, worst(c, (d, p)))
@@ -421,16 +444,120 @@ fn fit(
                 }
             },
         )
-        .reduce(
-            || ((0.0, DVec3::ZERO), (0.0, DVec3::ZERO)),
-            |(b0, c0), (b1, c1)| (worst(b0, b1), worst(c0, c1)),
-        );
+    };
+    // the vertices; a device vertex on a lens is the device B-rep's to measure
+    let on_device_lens = |label: RegionFace, v: u32| {
+        matches!(label, RegionFace::Lens(_)) && device_vertex(v).is_some()
+    };
+    let vertices: Vec<(f64, bool, DVec3)> = mesh
+        .triangles
+        .par_iter()
+        .zip(labels)
+        .flat_map_iter(|(t, &label)| t.map(|v| (label, v)))
+        .filter(|&(label, v)| !on_device_lens(label, v))
+        .filter_map(|(label, v)| {
+            let p = mesh.positions[v as usize];
+            let (q, channel) = foot(label, p)?;
+            Some((p.distance(q), channel, p))
+        })
+        .collect();
+    let ((block_mm, block_at), (channels_mm, channels_at)) = fold(vertices);
+    // the faces sampled: each triangle's centroid carried onto its face's
+    // exact surface, measured against that triangle (an upper bound on
+    // the distance to the mesh; the whole mesh is searched only where it
+    // is over half the tolerance), and every edge's curve, measured
+    // against the whole mesh
+    let grid = std::sync::OnceLock::new();
+    let near_enough = 0.5 * tolerance;
+    let centroids: Vec<(f64, bool, DVec3)> = mesh
+        .triangles
+        .par_iter()
+        .zip(labels)
+        .filter_map(|(t, &label)| {
+            if t.iter().all(|&v| on_device_lens(label, v)) {
+                return None;
+            }
+            let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
+            let (q, channel) = foot(label, (a + b + c) / 3.0)?;
+            let own = q.distance(closest_on_triangle(q, a, b, c));
+            let d = if own > near_enough {
+                grid.get_or_init(|| crate::crosscheck::TriangleGrid::new(mesh))
+                    .distance(q)
+            } else {
+                own
+            };
+            Some((d, channel, q))
+        })
+        .collect();
+    let edge_distances = edge_distances(mesh, edges);
+    let sampled = centroids.len() + edge_distances.len();
+    let ((samples_mm, samples_at), (channel_samples_mm, channel_samples_at)) =
+        fold(centroids.into_iter().chain(edge_distances).collect());
     Fit {
         block_mm,
         block_at,
         channels_mm,
         channels_at,
+        samples: sampled,
+        samples_mm,
+        samples_at,
+        channel_samples_mm,
+        channel_samples_at,
     }
+}
+
+/// Points along each of `edges` ([`curve_samples`]), with their distance
+/// from the mesh run the edge was built along (mesh edges, so it bounds
+/// the distance to the mesh from above) and whether the edge bounds a
+/// channel or key.
+fn edge_distances(mesh: &Mesh, edges: &[BuiltEdge]) -> Vec<(f64, bool, DVec3)> {
+    edges
+        .par_iter()
+        .flat_map_iter(|(run, curve, channel)| {
+            let segments: Vec<(DVec3, DVec3)> = run
+                .windows(2)
+                .map(|w| (mesh.positions[w[0] as usize], mesh.positions[w[1] as usize]))
+                .collect();
+            curve_samples(curve).into_iter().map(move |p| {
+                let d = segments
+                    .iter()
+                    .map(|&(a, b)| p.distance(closest_on_segment(p, a, b)))
+                    .fold(f64::INFINITY, f64::min);
+                (d, *channel, p)
+            })
+        })
+        .collect()
+}
+
+/// The radius of `bump`'s cone at height `z` (linear between its bottom
+/// and top circles).
+fn bump_radius(bump: &Bump, z: f64) -> f64 {
+    let (a, b) = (bump.bottom[0], bump.top[0]);
+    let along = (z - a.z) / (b.z - a.z);
+    (a + along * (b - a)).truncate().distance(bump.centre)
+}
+
+/// Points along `curve`, where it strays farthest from the mesh points it
+/// was built through: the middle of each of its knot spans, and at least
+/// 16 evenly spaced.
+fn curve_samples(curve: &Curve) -> Vec<DVec3> {
+    let knots: Vec<f64> = match curve {
+        Curve::BSplineCurve(c) => c.knot_vec().to_vec(),
+        Curve::NurbsCurve(c) => c.knot_vec().to_vec(),
+        _ => Vec::new(),
+    };
+    let (t0, t1) = truck_modeling::BoundedCurve::range_tuple(curve);
+    let even = (0..=16).map(|i| t0 + (t1 - t0) * i as f64 / 16.0);
+    let mids = knots
+        .windows(2)
+        .filter(|w| w[1] > w[0])
+        .map(|w| 0.5 * (w[0] + w[1]));
+    even.chain(mids)
+        .map(|t| {
+            let p = truck_modeling::ParametricCurve::subs(curve, t);
+            DVec3::new(p.x, p.y, p.z)
+        })
+        .collect()
 }
 
 /// Puts `p` exactly into the plane of `wall` of `rect`.

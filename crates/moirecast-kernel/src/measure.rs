@@ -288,7 +288,7 @@ pub fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
 }
 
 /// Closest point to `p` on the segment from `a` to `b`.
-fn closest_on_segment(p: DVec3, a: DVec3, b: DVec3) -> DVec3 {
+pub fn closest_on_segment(p: DVec3, a: DVec3, b: DVec3) -> DVec3 {
     let ab = b - a;
     let len2 = ab.length_squared();
     if len2 == 0.0 {
