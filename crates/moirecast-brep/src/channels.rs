@@ -310,20 +310,26 @@ pub(crate) fn solve_on_side(
     }
 }
 
+/// The indices where pieces of `len` points broken at `breaks` start and
+/// end: 0, the breaks strictly inside (sorted, once each), and the last.
+pub(crate) fn piece_bounds(len: usize, breaks: &[usize]) -> Vec<usize> {
+    let mut bounds: Vec<usize> = breaks
+        .iter()
+        .copied()
+        .filter(|&i| i > 0 && i + 1 < len)
+        .collect();
+    bounds.sort_unstable();
+    bounds.dedup();
+    bounds.insert(0, 0);
+    bounds.push(len - 1);
+    bounds
+}
+
 /// The edge through the exact points `pts` (in order), C² between breaks
 /// and C⁰ at the indices in `breaks`: cubic pieces, each through its
 /// points, joined end to end in one B-spline.
 pub(crate) fn piecewise_cubic(pts: &[DVec3], breaks: &[usize]) -> Curve {
-    let mut cuts: Vec<usize> = breaks
-        .iter()
-        .copied()
-        .filter(|&i| i > 0 && i + 1 < pts.len())
-        .collect();
-    cuts.sort_unstable();
-    cuts.dedup();
-    let mut bounds = vec![0];
-    bounds.extend(cuts);
-    bounds.push(pts.len() - 1);
+    let bounds = piece_bounds(pts.len(), breaks);
     let (knots, ctrl) = join_end_to_end(
         bounds.windows(2).map(|w| {
             let piece = cubic_through(&pts[w[0]..=w[1]], |p| p);

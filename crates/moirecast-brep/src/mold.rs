@@ -942,15 +942,7 @@ fn skirt_ellipse(
             .map(|&(a, _)| a)
             .min_by(|x, y| (x - t).abs().total_cmp(&(y - t).abs()))
     };
-    let mut bounds: Vec<usize> = breaks
-        .iter()
-        .copied()
-        .filter(|&i| i > 0 && i + 1 < pts.len())
-        .collect();
-    bounds.sort_unstable();
-    bounds.dedup();
-    bounds.insert(0, 0);
-    bounds.push(pts.len() - 1);
+    let bounds = channels::piece_bounds(pts.len(), breaks);
     let mut arcs = Vec::new();
     for (n, pair) in bounds.windows(2).enumerate() {
         let mut piece = pts[pair[0]..=pair[1]].to_vec();
