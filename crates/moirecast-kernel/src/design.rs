@@ -586,9 +586,11 @@ impl Design {
     /// until the validated region covers the base it finds.
     fn settle_margin(&mut self, base_afov: f64) -> Result<(), DesignError> {
         let mut covered = false;
+        // the revealer's dip depends on the layout only, not the margin
+        let mut dip = None;
         for _ in 0..6 {
             let validated = self.margin;
-            self.validate_surface(base_afov)?;
+            self.validate_surface(base_afov, &mut dip)?;
             if self.margin <= validated {
                 self.margin = validated;
                 covered = true;
@@ -626,7 +628,60 @@ impl Design {
         })
     }
 
-    fn validate_surface(&mut self, base_afov: f64) -> Result<(), DesignError> {
+    /// Stations along v and points across each lens at which
+    /// [`Design::revealer_dip`] measures.
+    const DIP_STATIONS: usize = 33;
+    const DIP_POINTS: [f64; 5] = [0.25, 0.375, 0.5, 0.625, 0.75];
+
+    /// The revealer's greatest depth below the pitch surface (mm, ≤ 0 where
+    /// it stays above), and the layout point where it is. A lens rises its
+    /// sag above its chord, but where the surface is convex along u the
+    /// chord cuts about κ·w²/8 under it; where that is more, the lens's
+    /// middle lies below f, and a base crease under it is nearer than its
+    /// depth (found-84500bc4b4ea7934: 0.13 mm on a bump, with d = 0.0056).
+    /// Measured along f's normal from the point of f at the same fraction
+    /// of the lens's layout span, at [`Self::DIP_POINTS`] across every lens
+    /// and [`Self::DIP_STATIONS`] stations. Skipped (0) where the surface's
+    /// largest curvature `kmax` bounds the dip at half the sag: with chords
+    /// w ≤ T / cos(slope), a constant-AFOV sag is w·tan(α/4)/2 and an
+    /// equal-radius one w²/(8 r_s).
+    fn revealer_dip(&self, kmax: f64, max_slope: f64) -> (f64, DVec2) {
+        let period = self.params.period;
+        let shallow = match self.revealer_rule {
+            ArcRule::ConstantAfov { half_angle } => {
+                let widest = period / max_slope.cos().max(1e-6);
+                kmax * widest <= 2.0 * (half_angle / 2.0).tan()
+            }
+            ArcRule::EqualRadius { radius } => 2.0 * kmax * radius <= 1.0,
+        };
+        if shallow {
+            return (0.0, DVec2::ZERO);
+        }
+        let mut deepest = (f64::NEG_INFINITY, DVec2::ZERO);
+        let stations = Self::DIP_STATIONS;
+        for j in 0..stations {
+            let v = self.half_height * (2.0 * j as f64 / (stations - 1) as f64 - 1.0);
+            for i in 0..self.lenses as i64 {
+                let arc = self.revealer_arc(i, v);
+                for t in Self::DIP_POINTS {
+                    let u = self.crease_u(i) + t * period;
+                    let (p, n) = self.surface().point_and_normal(u, v);
+                    let depth = (p - arc.point(t)).dot(n);
+                    // NaN (a surface undefined there) is left to the survey
+                    if depth > deepest.0 {
+                        deepest = (depth, DVec2::new(u, v));
+                    }
+                }
+            }
+        }
+        deepest
+    }
+
+    fn validate_surface(
+        &mut self,
+        base_afov: f64,
+        dip: &mut Option<(f64, DVec2)>,
+    ) -> Result<(), DesignError> {
         use limits::*;
         let radius_param = match self.surface() {
             PitchSurface::Formula(_) => Param::SurfaceFormula,
@@ -697,18 +752,31 @@ impl Design {
         self.max_slope = smax;
         // the revealer and the base meshes, each within the tolerance of
         // its surface, must not meet: the base at least MIN_DEPTH_TOLERANCES
-        // tolerances below the pitch surface
+        // tolerances below the pitch surface, and below the revealer's dip
         let min_depth = MIN_DEPTH_TOLERANCES * self.tolerance.mm();
-        if shallowest.0 < min_depth {
+        let (dip, dip_at) = *dip.get_or_insert_with(|| self.revealer_dip(kmax, smax));
+        let needed = min_depth + dip.max(0.0);
+        if shallowest.0 < needed {
             let at = shallowest.1;
+            let (why, fix) = if dip > 0.0 {
+                (
+                    format!("the revealer's lenses dip up to {dip:.4} mm below the pitch surface at layout ({:.1}, {:.1}) mm, where it is convex along u (their chords cut under it), so the base must lie at least that plus {MIN_DEPTH_TOLERANCES} × the mesh tolerance ({needed:.4} mm) below it", dip_at.x, dip_at.y),
+                    format!("use d ≥ {needed:.4} mm (D_s = {:.4} mm is the focal depth), a smaller period or a larger AFOV", self.standard.focal_depth),
+                )
+            } else {
+                (
+                    format!("it must lie at least {MIN_DEPTH_TOLERANCES} × the mesh tolerance ({min_depth} mm) below it"),
+                    format!("use d ≥ {min_depth} mm (D_s = {:.4} mm is the focal depth), or a finer mesh.tolerance", self.standard.focal_depth),
+                )
+            };
             return Err(err(
                 Param::BaseD,
                 format!("{:.4}", self.d),
                 format!(
-                    "the base lies only {:.4} mm below the pitch surface at layout ({:.1}, {:.1}) mm; it must lie at least {MIN_DEPTH_TOLERANCES} × the mesh tolerance ({min_depth} mm) below it, or the revealer and the base meet",
+                    "the base lies only {:.4} mm below the pitch surface at layout ({:.1}, {:.1}) mm; {why}, or the revealer and the base meet",
                     shallowest.0, at.x, at.y
                 ),
-                format!("use d ≥ {min_depth} mm (D_s = {:.4} mm is the focal depth), or a finer mesh.tolerance", self.standard.focal_depth),
+                fix,
             ));
         }
         // The fold is checked first: a folding base is the root cause when both fail.
@@ -1033,6 +1101,34 @@ mod tests {
         assert!((s.radius - std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-15);
         assert!((s.sag - (std::f64::consts::FRAC_1_SQRT_2 - 0.5)).abs() < 1e-15);
         assert!((s.focal_length - 3.0 * std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-14);
+    }
+
+    /// On a dome cylinder of radius R, a lens spanning T of arc has the
+    /// chord w = 2R·sin(T/2R), which cuts R(1 − cos(T/2R)) under the
+    /// surface at its middle, where the lens rises its sag w·tan(α/4)/2
+    /// above it: the revealer dips by the difference, and a base shallower
+    /// than that plus MIN_DEPTH_TOLERANCES tolerances is refused by base.d
+    /// (found-84500bc4b4ea7934).
+    #[test]
+    fn a_lens_dips_below_a_dome_by_hand() {
+        let (r, t, afov) = (10.0, 2.5, 10f64.to_radians());
+        let mut p = DesignParams::with_defaults(PitchSurface::Cylinder { radius: r }, 5.0, 3.0, t);
+        p.lens.afov = afov;
+        p.base.levels = 0.0;
+        p.base.d = Some(0.2);
+        let w = 2.0 * r * (t / (2.0 * r)).sin();
+        let dip = r * (1.0 - (t / (2.0 * r)).cos()) - w * (afov / 4.0).tan() / 2.0;
+        let design = Design::new(p.clone()).unwrap();
+        let (got, at) = design.revealer_dip(design.max_curvature, design.max_slope);
+        assert!((got - dip).abs() < 1e-12, "{got} vs {dip} by hand");
+        // at the middle of a lens
+        assert!(((at.x + 2.5) / t - 0.5).fract().abs() < 1e-9, "{at}");
+        let needed = dip + limits::MIN_DEPTH_TOLERANCES * p.tolerance;
+        p.base.d = Some(needed * 0.99);
+        let refused = Design::new(p.clone()).unwrap_err();
+        assert_eq!(refused.param, Param::BaseD, "{refused}");
+        p.base.d = Some(needed * 1.01);
+        Design::new(p).unwrap();
     }
 
     /// On a flat base a crease slanting by s turns the flank's tangent
