@@ -11,6 +11,7 @@
 //! red run is a change's doing; exploring is the soak's job:
 //! `MOIRECAST_SOAK=N` runs N times the cases from a new seed each run, and
 //! `MOIRECAST_FUZZ_SEED=S` (printed on every run) replays one.
+//! `MOIRECAST_FUZZ_CORPUS=DIR` replays and saves finds in DIR instead.
 
 use moirecast::{RunError, Thoroughness};
 use moirecast_kernel::progress::Silent;
@@ -361,8 +362,13 @@ fn guarded(text: String, with_mold: bool, out: PathBuf) -> Outcome {
         .unwrap_or_else(|_| Outcome::Bug(format!("no result after {CASE_TIMEOUT:?} (a hang)")))
 }
 
+/// The corpus: `tests/design-corpus/`, or `MOIRECAST_FUZZ_CORPUS`, so a
+/// soak run beside a checkout replays and saves into a copy of its own.
 fn corpus_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/design-corpus")
+    std::env::var_os("MOIRECAST_FUZZ_CORPUS").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/design-corpus"),
+        PathBuf::from,
+    )
 }
 
 /// Saves a failing spec into the corpus, so every later run replays it.
@@ -447,13 +453,16 @@ fn every_accepted_design_builds_or_is_refused_by_name() {
             slowest = (t.elapsed(), text);
         }
         let _ = std::fs::remove_dir_all(out.join(n.to_string()));
+        // a soak's counts so far, by rule: it may be stopped at any time
         if soak > 1 && (n + 1) % 1000 == 0 {
+            let by_rule: Vec<String> = refused.iter().map(|(r, c)| format!("{r} {c}")).collect();
             println!(
-                "  {} cases: {built} built ({molds} molds), {} refused, {} bugs, {:.0} s",
+                "  {} cases: {built} built ({molds} molds), {} refused, {} bugs, {:.0} s; refused by {}",
                 n + 1,
                 refused.values().sum::<usize>(),
                 bugs.len(),
-                started.elapsed().as_secs_f64()
+                started.elapsed().as_secs_f64(),
+                by_rule.join(", ")
             );
         }
     }

@@ -273,46 +273,52 @@ impl SampledProfile {
             (margin, nx, ny) = grid(spacing);
         }
         let origin = DVec2::new(-width / 2.0 - margin, -height / 2.0 - margin);
-        let lum = |x: f64, y: f64| -> f64 {
-            // bilinear in pixel-centre coordinates, border clamped
-            let fx =
-                (x / px + raster.width as f64 / 2.0 - 0.5).clamp(0.0, (raster.width - 1) as f64);
-            let fy =
-                (raster.height as f64 / 2.0 - y / px - 0.5).clamp(0.0, (raster.height - 1) as f64);
-            let (i0, j0) = (fx.floor() as usize, fy.floor() as usize);
-            let (i1, j1) = (
-                (i0 + 1).min(raster.width - 1),
-                (j0 + 1).min(raster.height - 1),
-            );
-            let (tx, ty) = (fx - i0 as f64, fy - j0 as f64);
-            let at = |i: usize, j: usize| raster.luminance[j * raster.width + i] as f64;
-            let top = at(i0, j0) * (1.0 - tx) + at(i1, j0) * tx;
-            let bot = at(i0, j1) * (1.0 - tx) + at(i1, j1) * tx;
-            top * (1.0 - ty) + bot * ty
-        };
-        // A cell wider than a pixel takes the mean of m × m samples spread
+        // Bilinear samples in pixel-centre coordinates, border clamped. A
+        // cell wider than a pixel takes the mean of m × m samples spread
         // over it (a box filter), so pixels between the cell centres still
-        // count; a cell no wider than a pixel takes the one sample.
+        // count; a cell no wider than a pixel takes the one sample. The
+        // grid of samples is a product of columns and rows, so each
+        // column's and row's pixel pair and weight is worked out once.
         let m = ((spacing / px).ceil() as usize).clamp(1, MAX_SUBSAMPLES);
-        let cell_mean = |x: f64, y: f64| -> f64 {
-            if m == 1 {
-                return lum(x, y);
-            }
-            let offset = |k: usize| ((k as f64 + 0.5) / m as f64 - 0.5) * spacing;
-            let mut sum = 0.0;
-            for b in 0..m {
-                for a in 0..m {
-                    sum += lum(x + offset(a), y + offset(b));
+        let offset = |k: usize| ((k as f64 + 0.5) / m as f64 - 0.5) * spacing;
+        let taps = |count: usize, start: f64, pixels: usize, to_pixel: &dyn Fn(f64) -> f64| {
+            let mut taps = Vec::with_capacity(count * m);
+            for c in 0..count {
+                let centre = start + c as f64 * spacing;
+                for k in 0..m {
+                    let at = if m == 1 { centre } else { centre + offset(k) };
+                    let f = to_pixel(at).clamp(0.0, (pixels - 1) as f64);
+                    let lo = f.floor() as usize;
+                    taps.push((lo, (lo + 1).min(pixels - 1), f - lo as f64));
                 }
             }
-            sum / (m * m) as f64
+            taps
         };
+        let (w, h) = (raster.width, raster.height);
+        let columns = taps(nx, origin.x, w, &|x| x / px + w as f64 / 2.0 - 0.5);
+        let rows = taps(ny, origin.y, h, &|y| h as f64 / 2.0 - y / px - 0.5);
+        let lum = &raster.luminance;
         let mut values = vec![0.0; nx * ny];
         {
             use rayon::prelude::*;
             values.par_chunks_mut(nx).enumerate().for_each(|(j, row)| {
+                let row_taps = &rows[j * m..(j + 1) * m];
                 for (i, v) in row.iter_mut().enumerate() {
-                    let l = cell_mean(origin.x + i as f64 * spacing, origin.y + j as f64 * spacing);
+                    let mut sum = 0.0;
+                    for &(j0, j1, ty) in row_taps {
+                        let (r0, r1) = (&lum[j0 * w..(j0 + 1) * w], &lum[j1 * w..(j1 + 1) * w]);
+                        for &(i0, i1, tx) in &columns[i * m..(i + 1) * m] {
+                            let top = r0[i0] as f64 * (1.0 - tx) + r0[i1] as f64 * tx;
+                            let bot = r1[i0] as f64 * (1.0 - tx) + r1[i1] as f64 * tx;
+                            let sample = top * (1.0 - ty) + bot * ty;
+                            if m == 1 {
+                                sum = sample;
+                            } else {
+                                sum += sample;
+                            }
+                        }
+                    }
+                    let l = if m == 1 { sum } else { sum / (m * m) as f64 };
                     *v = if invert { 1.0 - l } else { l };
                 }
             });
@@ -558,26 +564,23 @@ fn gaussian_blur(values: &mut [f64], nx: usize, ny: usize, sigma_cells: f64) {
     let sum: f64 = kernel.iter().sum();
     let kernel: Vec<f64> = kernel.iter().map(|k| k / sum).collect();
     // rows in parallel; each value sums its kernel taps in the same order
-    // as a serial loop would, so the result does not depend on the threads
+    // as a serial loop would, so the result does not depend on the threads.
+    // Tap by tap over the whole row (a border-padded copy of it), like the
+    // vertical pass: the same sums in the same order per value, but the
+    // values of a row no longer wait on each other's additions, so the
+    // loop runs vectorised.
     use rayon::prelude::*;
     let mut tmp = vec![0.0; values.len()];
     let r = radius as usize;
     tmp.par_chunks_mut(nx).enumerate().for_each(|(j, row)| {
         let src = &values[j * nx..(j + 1) * nx];
-        for (i, out) in row.iter_mut().enumerate() {
-            let mut acc = 0.0;
-            if i >= r && i + r < nx {
-                // away from the border: the taps are one slice (same order)
-                for (w, v) in kernel.iter().zip(&src[i - r..=i + r]) {
-                    acc += w * v;
-                }
-            } else {
-                for (t, w) in kernel.iter().enumerate() {
-                    let ii = (i as isize + t as isize - radius).clamp(0, nx as isize - 1) as usize;
-                    acc += w * src[ii];
-                }
+        let padded: Vec<f64> = (0..nx + 2 * r)
+            .map(|p| src[p.saturating_sub(r).min(nx - 1)])
+            .collect();
+        for (t, w) in kernel.iter().enumerate() {
+            for (out, v) in row.iter_mut().zip(&padded[t..t + nx]) {
+                *out += w * v;
             }
-            *out = acc;
         }
     });
     // the vertical pass row by row: whole source rows, read contiguously
