@@ -665,6 +665,7 @@ fn a_small_mold_builds_with_every_file_and_check() {
         "mold-brep-channels-fit",
         "mold-brep-samples-fit",
         "mold-brep-channel-samples-fit",
+        "mold-brep-device-samples-fit",
     ] {
         assert!(
             report.contains(&format!("\"name\": \"{name}\"")),

@@ -106,7 +106,8 @@ pub struct MoldStep {
     pub top_step: StepText,
     pub bottom_step: StepText,
     /// `mold-brep-euler`, `mold-brep-fit`, `mold-brep-channels-fit`,
-    /// `mold-brep-samples-fit` and `mold-brep-channel-samples-fit`, with
+    /// `mold-brep-samples-fit`, `mold-brep-channel-samples-fit` and
+    /// `mold-brep-device-samples-fit`, with
     /// their evidence. (A shell that is not closed is an error of
     /// [`mold::half_brep`] itself.)
     pub checks: Vec<CheckResult>,
@@ -182,6 +183,7 @@ fn mold_brep_checks(
     let (samples, samples_at) = worst(|f| (f.samples_mm, f.samples_at));
     let (channel_samples, channel_samples_at) =
         worst(|f| (f.channel_samples_mm, f.channel_samples_at));
+    let (device_samples, device_samples_at) = worst(|f| (f.device_samples_mm, f.device_samples_at));
     let sampled = top.fit.samples + bottom.fit.samples;
     // the widest channel or key, whose 48-gon's flats sag most
     let exact = &mold.exact;
@@ -240,7 +242,7 @@ fn mold_brep_checks(
             design.tolerance.mm() + f32_step,
             "mm",
             format!(
-                "worst distance from the mesh half of {sampled} points sampled on both halves' B-rep faces (each mesh triangle's centroid carried onto its face's exact surface, and points along every edge's curve; off the channels and keys), at ({:.3}, {:.3}, {:.3}); the limit is the tolerance and the f32 rounding of the half's vertices",
+                "worst distance from the mesh half of {sampled} points sampled on both halves' B-rep faces (each mesh triangle's centroid carried onto its face's exact surface, and points along every edge's curve; here those on the mold's own faces and edges, off the channels, keys and lenses), at ({:.3}, {:.3}, {:.3}); the limit is the tolerance and the f32 rounding of the half's vertices",
                 samples_at.x, samples_at.y, samples_at.z
             ),
         ),
@@ -252,6 +254,16 @@ fn mold_brep_checks(
             format!(
                 "the same on the channels' and keys' sides and ends, at ({:.3}, {:.3}, {:.3}); the limit is the widest 48-gon's sag, the tolerance (an edge where a channel meets a lens is within the sag of one and the tolerance of the other) and f32 rounding",
                 channel_samples_at.x, channel_samples_at.y, channel_samples_at.z
+            ),
+        ),
+        CheckResult::at_most(
+            "mold-brep-device-samples-fit",
+            device_samples,
+            2.0 * design.tolerance.mm() + f32_step,
+            "mm",
+            format!(
+                "the same on the device's lens faces and the creases and rims they bound, at ({:.3}, {:.3}, {:.3}); these carry the device B-rep's NURBS, which lie within the tolerance of the exact model (brep-surface-fit), as the mesh does: the limit is twice the tolerance and f32 rounding (found-759cc4db2bedb3ff: a fitted crease 1.54 µm from its mesh run, at a tolerance of 1.43 µm)",
+                device_samples_at.x, device_samples_at.y, device_samples_at.z
             ),
         ),
     ]

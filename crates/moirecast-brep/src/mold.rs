@@ -93,13 +93,30 @@ pub struct Fit {
     /// centroid carried onto its face's exact surface, and points along
     /// every edge's curve.
     pub samples: usize,
-    /// The worst distance (mm) of a sampled point off the channels and
-    /// keys from the mesh, and where it is.
+    /// The worst distance (mm) from the mesh of a point sampled on the
+    /// mold's own exact faces and edges, and where it is.
     pub samples_mm: f64,
     pub samples_at: DVec3,
     /// The same on the channels' and keys' sides and ends.
     pub channel_samples_mm: f64,
     pub channel_samples_at: DVec3,
+    /// The same on the device's lens faces and on the edges they bound
+    /// (creases, rims), which carry the device B-rep's NURBS.
+    pub device_samples_mm: f64,
+    pub device_samples_at: DVec3,
+}
+
+/// Whose surface a sampled point lies on, which sets how near the mesh it
+/// must be.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Sampled {
+    /// The mold's own faces and edges, exact to round-off.
+    Mold,
+    /// A channel's or key's side or end, meshed as a 48-gon.
+    Channel,
+    /// The device's lens faces and their edges: the device B-rep's NURBS,
+    /// themselves within the tolerance of the exact model.
+    Device,
 }
 
 /// The region's geometry beside its mesh: where its planes lie.
@@ -128,9 +145,10 @@ pub(crate) fn matrix_of(map: DAffine3) -> Matrix4 {
     )
 }
 
-/// An edge's curve, the mesh run it was built along, and whether it bounds
-/// a channel's or key's side or end.
-type BuiltEdge = (Vec<u32>, Curve, bool);
+/// An edge's curve, the mesh run it was built along, and whose surface it
+/// lies on: a channel's or key's if it bounds one, else the device's if it
+/// bounds a lens.
+type BuiltEdge = (Vec<u32>, Curve, Sampled);
 
 /// The posed device's vertex a region's or half's vertex is, if it is one.
 type DeviceVertex<'a> = &'a (dyn Fn(u32) -> Option<u32> + Sync);
@@ -305,8 +323,8 @@ fn build<'a>(
         .map(|&w| Some((w, mid_curve(&frame, &pieces, w)?)))
         .collect::<Option<_>>()
         .ok_or_else(|| BrepError::Topology("a wall has no mid curve".into()))?;
-    // every edge's curve, the mesh run it was built along, and whether it
-    // bounds a channel's or key's side or end
+    // every edge's curve, the mesh run it was built along, and whose
+    // surface it lies on
     let mut built_edges: Vec<BuiltEdge> = Vec::new();
     let assembled = assemble(
         &pieces,
@@ -334,8 +352,15 @@ fn build<'a>(
                         | RegionFace::Block(RegionSurface::BumpSide(..))
                 )
             };
-            let channel = on_channel(piece.patch) || on_channel(other.patch);
-            built_edges.push((run.vertices.clone(), curve.clone(), channel));
+            let on_lens = |f: RegionFace| matches!(f, RegionFace::Lens(_));
+            let kind = if on_channel(piece.patch) || on_channel(other.patch) {
+                Sampled::Channel
+            } else if on_lens(piece.patch) || on_lens(other.patch) {
+                Sampled::Device
+            } else {
+                Sampled::Mold
+            };
+            built_edges.push((run.vertices.clone(), curve.clone(), kind));
             Ok(curve)
         },
         |piece, wires| make_face(&frame, piece, wires, &params, &posed_surfaces, &mid_curves),
@@ -390,19 +415,19 @@ fn fit(
         })
         .collect();
     // the point of `label`'s exact surface that `p` is measured against,
-    // and whether it is a channel's or key's (None on the device's floor)
-    let foot = |label: RegionFace, p: DVec3| -> Option<(DVec3, bool)> {
-        let plane_z = |z: f64| Some((DVec3::new(p.x, p.y, z), false));
+    // and whose surface it is (None on the device's floor)
+    let foot = |label: RegionFace, p: DVec3| -> Option<(DVec3, Sampled)> {
+        let plane_z = |z: f64| Some((DVec3::new(p.x, p.y, z), Sampled::Mold));
         match label {
             RegionFace::Lens(lens) => {
                 let s = &surfaces[&lens];
                 let (u, w) = s.search_nearest_parameter(point3(p), None, 100)?;
                 let q = s.subs(u, w);
-                Some((DVec3::new(q.x, q.y, q.z), false))
+                Some((DVec3::new(q.x, q.y, q.z), Sampled::Device))
             }
-            RegionFace::Wall(w) => Some((onto(&frame.outline, w, p), false)),
+            RegionFace::Wall(w) => Some((onto(&frame.outline, w, p), Sampled::Mold)),
             RegionFace::Block(RegionSurface::Side(w)) => {
-                Some((onto(&frame.footprint, w, p), false))
+                Some((onto(&frame.footprint, w, p), Sampled::Mold))
             }
             RegionFace::Block(RegionSurface::Cap) => plane_z(frame.cap_z),
             RegionFace::Block(RegionSurface::Skirt(w)) => {
@@ -414,7 +439,10 @@ fn fit(
             RegionFace::Block(RegionSurface::BumpSide(k, _)) => {
                 let centre = frame.bumps.get(&k)?.centre.extend(p.z);
                 let radial = (p - centre).normalize_or_zero();
-                Some((centre + bump_radius(frame.bumps[&k], p.z) * radial, true))
+                Some((
+                    centre + bump_radius(frame.bumps[&k], p.z) * radial,
+                    Sampled::Channel,
+                ))
             }
             RegionFace::Block(RegionSurface::Device) => None,
             RegionFace::ChannelSide(k, _) => {
@@ -422,34 +450,34 @@ fn fit(
                 let f = channels::frame(c);
                 let axis = f.origin + f.along(p) * f.axis;
                 let radial = (p - axis).normalize_or_zero();
-                Some((axis + channels::radius_at(c, f.along(p)) * radial, true))
+                Some((
+                    axis + channels::radius_at(c, f.along(p)) * radial,
+                    Sampled::Channel,
+                ))
             }
             RegionFace::ChannelEnd(k) => {
                 let f = channels::frame(&frame.channels[k]);
                 let h = f.along(p) - f.along(first_at[&label]);
-                Some((p - h * f.axis, true))
+                Some((p - h * f.axis, Sampled::Channel))
             }
         }
     };
     let worst = |a: (f64, DVec3), b: (f64, DVec3)| if b.0 > a.0 { b } else { a };
-    // (distance, on a channel, where), folded into the worst of each kind
-    let fold = |items: Vec<(f64, bool, DVec3)>| {
-        items.into_iter().fold(
-            ((0.0, DVec3::ZERO), (0.0, DVec3::ZERO)),
-            |(b, c), (d, channel, p)| {
-                if channel {
-                    (b, worst(c, (d, p)))
-                } else {
-                    (worst(b, (d, p)), c)
-                }
-            },
-        )
+    // (distance, whose surface, where), folded into the worst of each
+    // kind: the mold's, the channels', the device's
+    let fold = |items: Vec<(f64, Sampled, DVec3)>| {
+        items
+            .into_iter()
+            .fold([(0.0, DVec3::ZERO); 3], |mut w, (d, kind, p)| {
+                w[kind as usize] = worst(w[kind as usize], (d, p));
+                w
+            })
     };
     // the vertices; a device vertex on a lens is the device B-rep's to measure
     let on_device_lens = |label: RegionFace, v: u32| {
         matches!(label, RegionFace::Lens(_)) && device_vertex(v).is_some()
     };
-    let vertices: Vec<(f64, bool, DVec3)> = mesh
+    let vertices: Vec<(f64, Sampled, DVec3)> = mesh
         .triangles
         .par_iter()
         .zip(labels)
@@ -457,11 +485,14 @@ fn fit(
         .filter(|&(label, v)| !on_device_lens(label, v))
         .filter_map(|(label, v)| {
             let p = mesh.positions[v as usize];
-            let (q, channel) = foot(label, p)?;
-            Some((p.distance(q), channel, p))
+            let (q, kind) = foot(label, p)?;
+            Some((p.distance(q), kind, p))
         })
         .collect();
-    let ((block_mm, block_at), (channels_mm, channels_at)) = fold(vertices);
+    // a lens vertex a channel made is held to the tolerance, as the
+    // mold's own are
+    let [mold_vertices, (channels_mm, channels_at), lens_vertices] = fold(vertices);
+    let (block_mm, block_at) = worst(mold_vertices, lens_vertices);
     // the faces sampled: each triangle's centroid carried onto its face's
     // exact surface, measured against that triangle (an upper bound on
     // the distance to the mesh; the whole mesh is searched only where it
@@ -469,7 +500,7 @@ fn fit(
     // against the whole mesh
     let grid = std::sync::OnceLock::new();
     let near_enough = 0.5 * tolerance;
-    let centroids: Vec<(f64, bool, DVec3)> = mesh
+    let centroids: Vec<(f64, Sampled, DVec3)> = mesh
         .triangles
         .par_iter()
         .zip(labels)
@@ -478,7 +509,7 @@ fn fit(
                 return None;
             }
             let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
-            let (q, channel) = foot(label, (a + b + c) / 3.0)?;
+            let (q, kind) = foot(label, (a + b + c) / 3.0)?;
             let own = q.distance(closest_on_triangle(q, a, b, c));
             let d = if own > near_enough {
                 grid.get_or_init(|| crate::crosscheck::TriangleGrid::new(mesh))
@@ -486,12 +517,12 @@ fn fit(
             } else {
                 own
             };
-            Some((d, channel, q))
+            Some((d, kind, q))
         })
         .collect();
     let edge_distances = edge_distances(mesh, edges);
     let sampled = centroids.len() + edge_distances.len();
-    let ((samples_mm, samples_at), (channel_samples_mm, channel_samples_at)) =
+    let [(samples_mm, samples_at), (channel_samples_mm, channel_samples_at), (device_samples_mm, device_samples_at)] =
         fold(centroids.into_iter().chain(edge_distances).collect());
     Fit {
         block_mm,
@@ -503,17 +534,18 @@ fn fit(
         samples_at,
         channel_samples_mm,
         channel_samples_at,
+        device_samples_mm,
+        device_samples_at,
     }
 }
 
 /// Points along each of `edges` ([`curve_samples`]), with their distance
 /// from the mesh run the edge was built along (mesh edges, so it bounds
-/// the distance to the mesh from above) and whether the edge bounds a
-/// channel or key.
-fn edge_distances(mesh: &Mesh, edges: &[BuiltEdge]) -> Vec<(f64, bool, DVec3)> {
+/// the distance to the mesh from above) and whose surface the edge lies on.
+fn edge_distances(mesh: &Mesh, edges: &[BuiltEdge]) -> Vec<(f64, Sampled, DVec3)> {
     edges
         .par_iter()
-        .flat_map_iter(|(run, curve, channel)| {
+        .flat_map_iter(|(run, curve, kind)| {
             let segments: Vec<(DVec3, DVec3)> = run
                 .windows(2)
                 .map(|w| (mesh.positions[w[0] as usize], mesh.positions[w[1] as usize]))
@@ -523,7 +555,7 @@ fn edge_distances(mesh: &Mesh, edges: &[BuiltEdge]) -> Vec<(f64, bool, DVec3)> {
                     .iter()
                     .map(|&(a, b)| p.distance(closest_on_segment(p, a, b)))
                     .fold(f64::INFINITY, f64::min);
-                (d, *channel, p)
+                (d, *kind, p)
             })
         })
         .collect()

@@ -677,6 +677,45 @@ impl Design {
         deepest
     }
 
+    /// The revealer and the base meshes, each within the tolerance of its
+    /// surface, must not meet: the base (shallowest at `shallowest`) at
+    /// least MIN_DEPTH_TOLERANCES tolerances below the pitch surface, and
+    /// below the revealer's `dip` ([`Design::revealer_dip`]).
+    fn validate_depth(
+        &self,
+        shallowest: (f64, DVec2),
+        (dip, dip_at): (f64, DVec2),
+    ) -> Result<(), DesignError> {
+        use limits::MIN_DEPTH_TOLERANCES;
+        let min_depth = MIN_DEPTH_TOLERANCES * self.tolerance.mm();
+        let needed = min_depth + dip.max(0.0);
+        if shallowest.0 < needed {
+            let at = shallowest.1;
+            let (why, fix) = if dip > 0.0 {
+                (
+                    format!("the revealer's lenses dip up to {dip:.4} mm below the pitch surface at layout ({:.1}, {:.1}) mm, where it is convex along u (their chords cut under it), so the base must lie at least that plus {MIN_DEPTH_TOLERANCES} × the mesh tolerance ({needed:.4} mm) below it", dip_at.x, dip_at.y),
+                    format!("use d ≥ {needed:.4} mm (D_s = {:.4} mm is the focal depth), a smaller period or a larger AFOV", self.standard.focal_depth),
+                )
+            } else {
+                (
+                    format!("it must lie at least {MIN_DEPTH_TOLERANCES} × the mesh tolerance ({min_depth} mm) below it"),
+                    format!("use d ≥ {min_depth} mm (D_s = {:.4} mm is the focal depth), or a finer mesh.tolerance", self.standard.focal_depth),
+                )
+            };
+            Err(err(
+                Param::BaseD,
+                format!("{:.4}", self.d),
+                format!(
+                    "the base lies only {:.4} mm below the pitch surface at layout ({:.1}, {:.1}) mm; {why}, or the revealer and the base meet",
+                    shallowest.0, at.x, at.y
+                ),
+                fix,
+            ))
+        } else {
+            Ok(())
+        }
+    }
+
     fn validate_surface(
         &mut self,
         base_afov: f64,
@@ -750,35 +789,8 @@ impl Design {
         }
         self.max_curvature = kmax;
         self.max_slope = smax;
-        // the revealer and the base meshes, each within the tolerance of
-        // its surface, must not meet: the base at least MIN_DEPTH_TOLERANCES
-        // tolerances below the pitch surface, and below the revealer's dip
-        let min_depth = MIN_DEPTH_TOLERANCES * self.tolerance.mm();
-        let (dip, dip_at) = *dip.get_or_insert_with(|| self.revealer_dip(kmax, smax));
-        let needed = min_depth + dip.max(0.0);
-        if shallowest.0 < needed {
-            let at = shallowest.1;
-            let (why, fix) = if dip > 0.0 {
-                (
-                    format!("the revealer's lenses dip up to {dip:.4} mm below the pitch surface at layout ({:.1}, {:.1}) mm, where it is convex along u (their chords cut under it), so the base must lie at least that plus {MIN_DEPTH_TOLERANCES} × the mesh tolerance ({needed:.4} mm) below it", dip_at.x, dip_at.y),
-                    format!("use d ≥ {needed:.4} mm (D_s = {:.4} mm is the focal depth), a smaller period or a larger AFOV", self.standard.focal_depth),
-                )
-            } else {
-                (
-                    format!("it must lie at least {MIN_DEPTH_TOLERANCES} × the mesh tolerance ({min_depth} mm) below it"),
-                    format!("use d ≥ {min_depth} mm (D_s = {:.4} mm is the focal depth), or a finer mesh.tolerance", self.standard.focal_depth),
-                )
-            };
-            return Err(err(
-                Param::BaseD,
-                format!("{:.4}", self.d),
-                format!(
-                    "the base lies only {:.4} mm below the pitch surface at layout ({:.1}, {:.1}) mm; {why}, or the revealer and the base meet",
-                    shallowest.0, at.x, at.y
-                ),
-                fix,
-            ));
-        }
+        let dip = *dip.get_or_insert_with(|| self.revealer_dip(kmax, smax));
+        self.validate_depth(shallowest, dip)?;
         // The fold is checked first: a folding base is the root cause when both fail.
         if worst_fold >= MAX_FOLD {
             let allowed = MAX_FOLD / kmax;
