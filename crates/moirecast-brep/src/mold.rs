@@ -119,6 +119,30 @@ enum Sampled {
     Device,
 }
 
+impl Sampled {
+    /// Whose surface a point of `face` lies on.
+    fn of(face: RegionFace) -> Self {
+        match face {
+            RegionFace::ChannelSide(..)
+            | RegionFace::ChannelEnd(_)
+            | RegionFace::Block(RegionSurface::BumpSide(..)) => Sampled::Channel,
+            RegionFace::Lens(_) => Sampled::Device,
+            _ => Sampled::Mold,
+        }
+    }
+
+    /// Whose surface an edge between faces `a` and `b` lies on: a channel's
+    /// where either is one (its 48-gon sets the edge's mesh run), else the
+    /// device's where either is a lens.
+    fn of_edge(a: RegionFace, b: RegionFace) -> Self {
+        match (Sampled::of(a), Sampled::of(b)) {
+            (Sampled::Channel, _) | (_, Sampled::Channel) => Sampled::Channel,
+            (Sampled::Device, _) | (_, Sampled::Device) => Sampled::Device,
+            _ => Sampled::Mold,
+        }
+    }
+}
+
 /// The region's geometry beside its mesh: where its planes lie.
 struct Frame<'a> {
     outline: Rect,
@@ -129,12 +153,10 @@ struct Frame<'a> {
     bumps: HashMap<usize, &'a Bump>,
     /// The channels a half's `ChannelSide` and `ChannelEnd` faces index.
     channels: &'a [ChannelShape],
+    /// The mesh's tolerance (mm): a vertex a channel made on a crease lies
+    /// on the mesh's chord there, within this of the crease.
+    tolerance: f64,
 }
-
-/// How far (in the lens's across parameter, 0 to 1) a vertex a channel
-/// made on a crease may be found from it: the mesh's chord there lies
-/// within the tolerance of the crease, far inside this.
-const CREASE_SAG: f64 = 1e-2;
 
 /// The truck matrix of an affine map of points.
 pub(crate) fn matrix_of(map: DAffine3) -> Matrix4 {
@@ -195,6 +217,7 @@ pub fn region_brep(
             mesh: &region.mesh,
             bumps: HashMap::new(),
             channels: &[],
+            tolerance: design.tolerance.mm(),
         },
         bumps,
     )
@@ -249,6 +272,7 @@ pub fn half_brep(
             mesh,
             bumps: HashMap::new(),
             channels: &exact.channels,
+            tolerance: design.tolerance.mm(),
         },
         &exact.bumps,
     )
@@ -344,23 +368,11 @@ fn build<'a>(
                 },
                 &mid_curves,
             )?;
-            let on_channel = |f: RegionFace| {
-                matches!(
-                    f,
-                    RegionFace::ChannelSide(..)
-                        | RegionFace::ChannelEnd(_)
-                        | RegionFace::Block(RegionSurface::BumpSide(..))
-                )
-            };
-            let on_lens = |f: RegionFace| matches!(f, RegionFace::Lens(_));
-            let kind = if on_channel(piece.patch) || on_channel(other.patch) {
-                Sampled::Channel
-            } else if on_lens(piece.patch) || on_lens(other.patch) {
-                Sampled::Device
-            } else {
-                Sampled::Mold
-            };
-            built_edges.push((run.vertices.clone(), curve.clone(), kind));
+            built_edges.push((
+                run.vertices.clone(),
+                curve.clone(),
+                Sampled::of_edge(piece.patch, other.patch),
+            ));
             Ok(curve)
         },
         |piece, wires| make_face(&frame, piece, wires, &params, &posed_surfaces, &mid_curves),
@@ -414,21 +426,19 @@ fn fit(
             (w, k)
         })
         .collect();
-    // the point of `label`'s exact surface that `p` is measured against,
-    // and whose surface it is (None on the device's floor)
-    let foot = |label: RegionFace, p: DVec3| -> Option<(DVec3, Sampled)> {
-        let plane_z = |z: f64| Some((DVec3::new(p.x, p.y, z), Sampled::Mold));
+    // the point of `label`'s exact surface that `p` is measured against
+    // (None on the device's floor)
+    let foot = |label: RegionFace, p: DVec3| -> Option<DVec3> {
+        let plane_z = |z: f64| Some(DVec3::new(p.x, p.y, z));
         match label {
             RegionFace::Lens(lens) => {
                 let s = &surfaces[&lens];
                 let (u, w) = s.search_nearest_parameter(point3(p), None, 100)?;
                 let q = s.subs(u, w);
-                Some((DVec3::new(q.x, q.y, q.z), Sampled::Device))
+                Some(DVec3::new(q.x, q.y, q.z))
             }
-            RegionFace::Wall(w) => Some((onto(&frame.outline, w, p), Sampled::Mold)),
-            RegionFace::Block(RegionSurface::Side(w)) => {
-                Some((onto(&frame.footprint, w, p), Sampled::Mold))
-            }
+            RegionFace::Wall(w) => Some(onto(&frame.outline, w, p)),
+            RegionFace::Block(RegionSurface::Side(w)) => Some(onto(&frame.footprint, w, p)),
             RegionFace::Block(RegionSurface::Cap) => plane_z(frame.cap_z),
             RegionFace::Block(RegionSurface::Skirt(w)) => {
                 plane_z(polyline_z(&knees[&w], w.along(p)))
@@ -439,10 +449,7 @@ fn fit(
             RegionFace::Block(RegionSurface::BumpSide(k, _)) => {
                 let centre = frame.bumps.get(&k)?.centre.extend(p.z);
                 let radial = (p - centre).normalize_or_zero();
-                Some((
-                    centre + bump_radius(frame.bumps[&k], p.z) * radial,
-                    Sampled::Channel,
-                ))
+                Some(centre + bump_radius(frame.bumps[&k], p.z) * radial)
             }
             RegionFace::Block(RegionSurface::Device) => None,
             RegionFace::ChannelSide(k, _) => {
@@ -450,15 +457,12 @@ fn fit(
                 let f = channels::frame(c);
                 let axis = f.origin + f.along(p) * f.axis;
                 let radial = (p - axis).normalize_or_zero();
-                Some((
-                    axis + channels::radius_at(c, f.along(p)) * radial,
-                    Sampled::Channel,
-                ))
+                Some(axis + channels::radius_at(c, f.along(p)) * radial)
             }
             RegionFace::ChannelEnd(k) => {
                 let f = channels::frame(&frame.channels[k]);
                 let h = f.along(p) - f.along(first_at[&label]);
-                Some((p - h * f.axis, Sampled::Channel))
+                Some(p - h * f.axis)
             }
         }
     };
@@ -485,7 +489,7 @@ fn fit(
         .filter(|&(label, v)| !on_device_lens(label, v))
         .filter_map(|(label, v)| {
             let p = mesh.positions[v as usize];
-            let (q, kind) = foot(label, p)?;
+            let (q, kind) = (foot(label, p)?, Sampled::of(label));
             Some((p.distance(q), kind, p))
         })
         .collect();
@@ -516,7 +520,7 @@ fn fit(
                 return None;
             }
             let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
-            let (q, kind) = foot(label, (a + b + c) / 3.0)?;
+            let (q, kind) = (foot(label, (a + b + c) / 3.0)?, Sampled::of(label));
             let own = q.distance(closest_on_triangle(q, a, b, c));
             Some((to_mesh(q, own), kind, q))
         })
@@ -753,11 +757,19 @@ fn edge_curve<'s>(
     match pair {
         (Lens(lens), Lens(_)) => {
             let (a, b, surface) = lens_ends(lens)?;
-            // a channel's vertex on a crease was found on the surface from
-            // the mesh's chord there, a sag away: near the crease, not on it
+            // a channel's vertex on a crease lies on the mesh's chord there,
+            // within the tolerance of the crease; the surface's point nearest
+            // it lies within that again along the crease. Its across
+            // parameter may be far from the crease's where the lens is steep
+            // (found-84f9858ee9297332: 0.0101 at 108.7° AFOV), so the ends
+            // are held to the crease in space, not in parameter.
+            let near_crease = |t: f64, end: DVec3, along: f64| {
+                let q = surface.subs(t, along);
+                end.distance(DVec3::new(q.x, q.y, q.z)) <= 2.0 * frame.tolerance
+            };
             let t = [0.0, 1.0]
                 .into_iter()
-                .find(|&t| (a.x - t).abs() < CREASE_SAG && (b.x - t).abs() < CREASE_SAG)
+                .find(|&t| near_crease(t, pts[0], a.y) && near_crease(t, pts[pts.len() - 1], b.y))
                 .ok_or_else(|| {
                     BrepError::Topology(format!(
                         "{lens:?} meets a lens away from a crease, from {} to {}",
