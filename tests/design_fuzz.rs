@@ -12,6 +12,10 @@
 //! `MOIRECAST_SOAK=N` runs N times the cases from a new seed each run, and
 //! `MOIRECAST_FUZZ_SEED=S` (printed on every run) replays one.
 //! `MOIRECAST_FUZZ_CORPUS=DIR` replays and saves finds in DIR instead.
+//! `MOIRECAST_FUZZ_FROM=N` runs from case N on (the cases before it are
+//! still drawn, so case N is the seed's own), and `MOIRECAST_FUZZ_VERBOSE`
+//! prints each case's spec before it runs and its outcome after: a case
+//! that takes the process down (out of memory, say) is the last printed.
 
 use moirecast::{RunError, Thoroughness};
 use moirecast_kernel::progress::Silent;
@@ -432,7 +436,14 @@ fn every_accepted_design_builds_or_is_refused_by_name() {
     let mut bugs = Vec::new();
     let (mut slowest, started) = ((Duration::ZERO, String::new()), Instant::now());
     let verbose = std::env::var_os("MOIRECAST_FUZZ_VERBOSE").is_some();
-    for (n, (text, with_mold, from)) in cases.into_iter().enumerate() {
+    let first: usize = std::env::var("MOIRECAST_FUZZ_FROM")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    for (n, (text, with_mold, from)) in cases.into_iter().enumerate().skip(first) {
+        if verbose {
+            println!("case {n} (mold: {with_mold}):\n{text}");
+        }
         let t = Instant::now();
         let outcome = guarded(text.clone(), with_mold, out.join(n.to_string()));
         if verbose {

@@ -23,8 +23,8 @@
 use crate::channels;
 use crate::error::BrepError;
 use crate::solid::{
-    assemble, closed_solid, crease_curve, cubic_through, face_facing, lens_families, point3,
-    surface_face,
+    assemble, boundary_span, closed_solid, crease_curve, cubic_through, cut_to_span, face_facing,
+    lens_families, point3, surface_face,
 };
 use crate::spline::chord_lengths;
 use crate::topology::{pieces, Piece, Run};
@@ -1103,8 +1103,9 @@ fn make_face(
                 params(tri[1], lens)?,
                 params(tri[2], lens)?,
             );
-            return surface_face(&surfaces[&lens], outward, (a + b + c) / 3.0, wires)
-                .map_err(refuse);
+            let span = boundary_span(piece, |v| params(v, lens))?;
+            let surface = cut_to_span(&surfaces[&lens], span);
+            return surface_face(surface, outward, (a + b + c) / 3.0, wires).map_err(refuse);
         }
         RegionFace::Wall(w) => axis_plane(onto(&out, w, p0)),
         RegionFace::Block(RegionSurface::Side(w)) => axis_plane(onto(&fp, w, p0)),

@@ -21,7 +21,8 @@
 use crate::error::BrepError;
 use crate::lenses::{worst_deviation, LensFamily};
 use crate::solid::{
-    assemble, crease_curve, lens_families, surface_face, trim_curve, wall_face, FIT_SHARE,
+    assemble, boundary_span, crease_curve, cut_to_span, lens_families, surface_face, trim_curve,
+    wall_face, FIT_SHARE,
 };
 use crate::spline::chord_lengths;
 use crate::topology::{pieces, Piece, Run};
@@ -404,7 +405,9 @@ impl BodyGeometry<'_> {
                     .map(|&v| self.params_on(v, lens))
                     .collect::<Result<Vec<_>, _>>()?;
                 let at = (pv[0] + pv[1] + pv[2]) / 3.0;
-                surface_face(&self.surface_of(lens, layer)?, outward, at, wires).map_err(refuse)
+                let span = boundary_span(piece, |v| self.params_on(v, lens))?;
+                let surface = cut_to_span(&self.surface_of(lens, layer)?, span);
+                surface_face(surface, outward, at, wires).map_err(refuse)
             }
             BodyFace::BandSide { crease } => {
                 // parameters: (0 at the top, 1 at the bottom; the station v)
@@ -420,7 +423,9 @@ impl BodyGeometry<'_> {
                     })
                     .collect::<Result<Vec<_>, _>>()?;
                 let at = (pv[0] + pv[1] + pv[2]) / 3.0;
-                surface_face(&self.surfaces.band_side(crease)?, outward, at, wires).map_err(refuse)
+                let span = boundary_span(piece, |v| self.params_on(v, LensRef::Base(crease)))?;
+                let surface = cut_to_span(&self.surfaces.band_side(crease)?, span);
+                surface_face(surface, outward, at, wires).map_err(refuse)
             }
             BodyFace::Repaired => self.repaired_face(piece, tri, outward, wires),
         }
@@ -472,7 +477,7 @@ impl BodyGeometry<'_> {
             })
             .collect::<Result<Vec<_>, BrepError>>()?;
         let at = (pv[0] + pv[1] + pv[2]) / 3.0;
-        surface_face(&surface, outward, at, wires).map_err(|e| BrepError::Truck {
+        surface_face(surface, outward, at, wires).map_err(|e| BrepError::Truck {
             what: "face",
             detail: format!("{:?}: {e}", piece.patch),
         })

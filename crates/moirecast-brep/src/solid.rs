@@ -438,18 +438,57 @@ pub(crate) fn wall_face(
 /// A face on `surface`, oriented like `outward` (a mesh triangle's normal)
 /// at the surface's parameters `at`.
 pub(crate) fn surface_face(
-    surface: &truck_modeling::NurbsSurface<truck_modeling::Vector4>,
+    surface: truck_modeling::NurbsSurface<truck_modeling::Vector4>,
     outward: DVec3,
     at: glam::DVec2,
     wires: Vec<Wire>,
 ) -> Result<Face, truck_topology::errors::Error> {
     let nat = surface.normal(at.x, at.y);
     let natural_is_outward = outward.dot(DVec3::new(nat.x, nat.y, nat.z)) > 0.0;
-    face_facing(
-        Surface::NurbsSurface(surface.clone()),
-        natural_is_outward,
-        wires,
-    )
+    face_facing(Surface::NurbsSurface(surface), natural_is_outward, wires)
+}
+
+/// The span of the along-lens parameter v over `piece`'s boundary, each
+/// vertex's parameters given by `params`.
+pub(crate) fn boundary_span<P>(
+    piece: &Piece<P>,
+    params: impl Fn(u32) -> Result<glam::DVec2, BrepError>,
+) -> Result<(f64, f64), BrepError> {
+    let mut span = (f64::INFINITY, f64::NEG_INFINITY);
+    for run in piece.loops.iter().flatten() {
+        for &v in &run.vertices {
+            let along = params(v)?.y;
+            span = (span.0.min(along), span.1.max(along));
+        }
+    }
+    Ok(span)
+}
+
+/// `surface` cut down along v to the knot spans that `span` touches and
+/// one more on each side, for a face whose boundary spans that: a face
+/// keeps only the part of a long lens or band surface it lies on. Where
+/// the walls clip a printed band into thousands of pieces, each holding
+/// the whole band's surface took over 22 GB (found-ee2e521bd310a47e:
+/// 6,941 faces of 3 × 4,130 control points). Its edges follow mesh runs
+/// between its boundary vertices, so they stay inside the spare span. The
+/// cut is knot insertion, exact but for round-off; a face that spans the
+/// surface to within a span of its ends keeps it whole.
+pub(crate) fn cut_to_span(
+    surface: &truck_modeling::NurbsSurface<truck_modeling::Vector4>,
+    (v0, v1): (f64, f64),
+) -> truck_modeling::NurbsSurface<truck_modeling::Vector4> {
+    let (knots, _) = surface.vknot_vec().to_single_multi();
+    let (first, last) = (knots[0], knots[knots.len() - 1]);
+    let lo = knots[knots.partition_point(|&k| k <= v0).saturating_sub(2)];
+    let hi = knots[(knots.partition_point(|&k| k < v1) + 1).min(knots.len() - 1)];
+    let mut part = surface.clone();
+    if lo > first {
+        part = part.vcut(lo);
+    }
+    if hi < last {
+        let _above = part.vcut(hi);
+    }
+    part
 }
 
 /// A face on `surface` bounded by `wires` (counter-clockwise seen from
@@ -488,7 +527,73 @@ fn make_face<'s>(
             let [p0, p1, p2] = tri.map(|v| dm.mesh.positions[v as usize]);
             let pv = tri.map(|v| dm.origins[v as usize].params_on(lens).expect("checked"));
             let at = (pv[0] + pv[1] + pv[2]) / 3.0;
-            surface_face(surface_of(lens), (p1 - p0).cross(p2 - p0), at, wires).map_err(refuse)
+            let span = boundary_span(piece, |v| {
+                dm.origins[v as usize].params_on(lens).ok_or_else(|| {
+                    BrepError::Topology(format!("boundary vertex {v} is not on {lens:?}"))
+                })
+            })?;
+            let surface = cut_to_span(surface_of(lens), span);
+            surface_face(surface, (p1 - p0).cross(p2 - p0), at, wires).map_err(refuse)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use truck_modeling::{BSplineSurface, KnotVec, NurbsSurface, Vector4};
+
+    /// A rational surface 3 control points across and 203 along: cubic in
+    /// v over 200 uniform spans, on [0, 1] × [0, 1].
+    fn long_surface() -> NurbsSurface<Vector4> {
+        let spans = 200;
+        let inner: Vec<f64> = (1..spans).map(|i| i as f64 / spans as f64).collect();
+        let vknots = KnotVec::from(
+            [vec![0.0; 4], inner, vec![1.0; 4]]
+                .into_iter()
+                .flatten()
+                .collect::<Vec<_>>(),
+        );
+        let rows = (0..3)
+            .map(|i| {
+                (0..spans + 3)
+                    .map(|j| {
+                        let (x, y) = (i as f64, j as f64 * 0.1);
+                        let w = 1.0 + 0.3 * ((i + j) as f64).sin().abs();
+                        Vector4::new(x * w, y * w, (0.7 * y).sin() * w, w)
+                    })
+                    .collect()
+            })
+            .collect();
+        NurbsSurface::new(BSplineSurface::new((KnotVec::bezier_knot(2), vknots), rows))
+    }
+
+    #[test]
+    fn a_face_keeps_only_its_span_of_a_long_surface() {
+        let whole = long_surface();
+        let part = cut_to_span(&whole, (0.401, 0.449));
+        let knots = part.vknot_vec();
+        let (lo, hi) = (knots[0], knots[knots.len() - 1]);
+        // the spans the face touches and one spare on each side
+        assert!(
+            (lo - 0.395).abs() < 1e-12 && (hi - 0.455).abs() < 1e-12,
+            "{lo} {hi}"
+        );
+        assert!(
+            part.control_points()[0].len() < 20,
+            "{}",
+            part.control_points()[0].len()
+        );
+        for i in 0..=10 {
+            for j in 0..=50 {
+                let (u, v) = (i as f64 / 10.0, lo + (hi - lo) * j as f64 / 50.0);
+                let (a, b) = (whole.subs(u, v), part.subs(u, v));
+                let d = DVec3::new(a.x - b.x, a.y - b.y, a.z - b.z).length();
+                assert!(d < 1e-12, "{d} at ({u}, {v})");
+            }
+        }
+        // a face over the whole surface keeps it as it is
+        let kept = cut_to_span(&whole, (0.003, 0.997));
+        assert_eq!(kept.control_points(), whole.control_points());
     }
 }
