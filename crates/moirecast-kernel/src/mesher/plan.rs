@@ -816,8 +816,10 @@ struct Crossing {
 /// A crossing close to a free interior row replaces it, so no sliver strips
 /// appear; boundary rows never move.
 /// Crossings closer than this (mm) to a pinned row join it: half the wall
-/// snap, twice the least triangle altitude.
-const MERGE_CROSSING_MM: f64 = WALL_SNAP_MM / 2.0;
+/// snap, twice the least triangle altitude. The row puts a joined crease
+/// that it leaves past the snap at the crease's exact crossing
+/// (`base::onto_near_crossings`).
+pub(super) const MERGE_CROSSING_MM: f64 = WALL_SNAP_MM / 2.0;
 /// A crossing up to this far (mm) from a row also joins it if its crease,
 /// followed along its slope, stays within half the wall snap of the wall
 /// at that row: the row's crease vertex snaps onto the wall and stands for
