@@ -520,7 +520,7 @@ fn row_creases(d: &Design, y: f64) -> Result<Vec<(f64, DVec3)>> {
 /// (found-57d2c7c0717920f4: 40.3 nm at slope 3.9 and a gap of 10.3 nm);
 /// its own row that far away would leave a strip as thin as the gap. The
 /// vertex stays on its crease and on the wall, off the row's height by
-/// less than the gap.
+/// the gap.
 fn onto_near_crossings(d: &Design, y: f64, creases: &mut [(f64, DVec3)]) {
     if y.abs() >= d.half_height {
         // the outline's corners stay on the y-walls
