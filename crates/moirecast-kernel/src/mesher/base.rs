@@ -3,12 +3,13 @@
 //! base lens the cut vertex is solved onto the wall, and rows are added
 //! until each trim edge meets the same chordal bound as the lens columns.
 
+use super::bend::{self, Corner};
 use super::plan::{MeshPlan, MERGE_CROSSING_MM};
 use super::zip::{zip, Strip};
 use crate::design::Design;
 use crate::device_mesh::{DeviceMesh, Patch, Side, VertexOrigin};
 use crate::error::{KernelError, Result};
-use crate::model::LensRef;
+use crate::model::{BaseSection, LensRef};
 use crate::progress::Progress;
 use crate::solve::{newton_1d, newton_2d};
 use crate::tolerance::{SOLVE_RESIDUAL_MM, WALL_SNAP_MM};
@@ -80,6 +81,9 @@ pub(super) fn rows(
         let mut extra = trim_rows(&base_rows, &base_row_data, base_columns);
         if extra.is_empty() {
             extra = missed_crossings(d, &base_rows, &base_row_data)?;
+        }
+        if extra.is_empty() {
+            extra = bent_strips(d, &base_rows, &base_row_data);
         }
         if extra.is_empty() {
             break;
@@ -204,6 +208,71 @@ fn crease_meets_wall(
         last = here;
     }
     Ok(found)
+}
+
+/// Heights of the rows to add (sorted): the middle of every strip in
+/// which a lens's column edge or quad misses the exact base (see
+/// [`super::bend`]). A lens's columns are matched between the two rows by
+/// their t, so cut vertices on a wall are left out. A base point costs a
+/// section solved between two creases, so each column's middle gets one,
+/// and a quad's centre is read off its two columns' sections (their
+/// stations differ by the row's spread in v over one column).
+fn bent_strips(d: &Design, ys: &[f64], rows: &[BaseRow]) -> Vec<f64> {
+    (0..rows.len() - 1)
+        .into_par_iter()
+        .filter(|&r| ys[r + 1] - ys[r] > bend::MIN_SPLIT)
+        .filter(|&r| {
+            let (a, b) = (&rows[r], &rows[r + 1]);
+            a.lenses.iter().any(|(&k, column_a)| {
+                let Some(column_b) = b.lenses.get(&k) else {
+                    return false;
+                };
+                let lens = LensRef::Base(k);
+                let corner = |row: &BaseRow, i: u32| {
+                    let params = row.origins[i as usize].params_on(lens)?;
+                    Some(Corner {
+                        params,
+                        p: row.positions[i as usize],
+                    })
+                };
+                // both rows list the lens's columns left to right, in t
+                let mut next_b = column_b.iter().filter_map(|&i| corner(b, i)).peekable();
+                let pairs = column_a
+                    .iter()
+                    .filter_map(|&i| corner(a, i))
+                    .filter_map(|ca| {
+                        while next_b.next_if(|cb| cb.params.x < ca.params.x).is_some() {}
+                        let cb = *next_b.peek()?;
+                        (cb.params.x == ca.params.x).then_some((ca, cb))
+                    });
+                // each section's creases start from the last one's
+                let mut near = (None, None);
+                let mut last = None;
+                for (ca, cb) in pairs {
+                    let q = 0.5 * (ca.params + cb.params);
+                    let Ok((section, u0, u1)) = d.base_section_and_creases(k, q.y, near) else {
+                        last = None;
+                        continue;
+                    };
+                    near = (Some(u0), Some(u1));
+                    if bend::column_misses(d, bend::on_device(d, section.point(q.x)), ca, cb) {
+                        return true;
+                    }
+                    if let Some((before, pa, pb)) = last.take() {
+                        let (pa, pb): (Corner, Corner) = (pa, pb);
+                        let t = 0.5 * (pa.params.x + ca.params.x);
+                        let centre = 0.5 * (section.point(t) + BaseSection::point(&before, t));
+                        if bend::centre_misses(d, bend::on_device(d, centre), [pa, ca, pb, cb]) {
+                            return true;
+                        }
+                    }
+                    last = Some((section, ca, cb));
+                }
+                false
+            })
+        })
+        .map(|r| 0.5 * (ys[r] + ys[r + 1]))
+        .collect()
 }
 
 /// Heights of the rows to add (sorted, distinct) so that, between two

@@ -4,7 +4,9 @@
 //! residual); the mesh is closed and consistently oriented *by construction*,
 //! because every vertex on a crease, a trim line or a wall is computed once
 //! and shared by index; the triangle count is close to the fewest that meet
-//! the tolerance, because rows and columns are spaced by the local curvature.
+//! the tolerance, because rows and columns are spaced by the local curvature,
+//! and rows are added where the placed ones, measured, still miss it
+//! ([`bend`]).
 //! [`crate::measure`] measures all of this independently.
 //!
 //! **Layout of the mesh.**
@@ -20,6 +22,7 @@
 //! - Walls: planar strips zipped between the top and bottom boundary polylines.
 
 mod base;
+mod bend;
 mod plan;
 mod revealer;
 mod walls;
@@ -42,6 +45,19 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
     let mut plan = plan::plan(design, progress)?;
     plan.within_budget(design)?;
     let mut revealer = revealer::vertices(design, &plan, progress)?;
+    for _ in 0..bend::MAX_BEND_PASSES {
+        let bent = bend::revealer_rows(
+            design,
+            (&plan.revealer_rows, &plan.revealer_columns),
+            &revealer,
+        );
+        let before = plan.revealer_rows.len();
+        plan.add_revealer_rows(&bent, design.half_height);
+        if plan.revealer_rows.len() == before {
+            break;
+        }
+        revealer = revealer::vertices(design, &plan, &crate::progress::Silent)?;
+    }
     let (base_ys, mut base_rows) = base::rows(design, &plan, progress)?;
     progress.stage("triangles", 1);
     // Where an x-wall folds (a sparse revealer edge over a steep, wavy
