@@ -8,6 +8,7 @@
 
 use super::revealer::RevealerRow;
 use crate::design::Design;
+use crate::measure::closest_on_segment;
 use crate::model::LensRef;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -62,17 +63,6 @@ pub(super) fn centre_misses(d: &Design, m: Option<DVec3>, [a0, a1, b0, b1]: [Cor
 /// Distance from `m` to the edge between `a` and `b`.
 fn off_edge(m: DVec3, a: Corner, b: Corner) -> f64 {
     m.distance(closest_on_segment(m, a.p, b.p))
-}
-
-/// The point of segment ab closest to p.
-fn closest_on_segment(p: DVec3, a: DVec3, b: DVec3) -> DVec3 {
-    let ab = b - a;
-    let t = ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0);
-    if t.is_finite() {
-        a + ab * t
-    } else {
-        a
-    }
 }
 
 /// `p`, if it lies on the device (inside the outline).
