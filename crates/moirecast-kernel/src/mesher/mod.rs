@@ -73,7 +73,6 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
             &dm,
             (&base_rows, &base_offsets),
             &walls::sparse_bottoms(&dm, &wall_part),
-            0.25 * design.params.period,
         );
         if (!folds.is_empty() || !under_creases.is_empty()) && pass < MAX_FOLD_PASSES {
             if !folds.is_empty() {

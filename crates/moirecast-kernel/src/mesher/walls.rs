@@ -155,47 +155,62 @@ pub(super) fn sparse_bottoms(dm: &DeviceMesh, strip: &Strip) -> Vec<(Side, f64)>
         .collect()
 }
 
+/// A base vertex nearer than this (mm) to the x of a revealer crease
+/// stands for the vertex under it. Fanned from a base vertex s off the
+/// crease, the steep arc beside it (slope up to about 2 at the widest
+/// AFOV) drops 2s below the crease, and the wall there is at least the
+/// printed base's depth (about 10 µm) high: 1 µm keeps every such
+/// triangle facing out, and a base edge 1 µm long fans into triangles
+/// hundreds of times thicker than [`MIN_ALTITUDE_MM`].
+const UNDER_CREASE_MM: f64 = 1e-3;
+
 /// Lens parameters to add to the base's wall rows where the front or back
-/// wall's base edge is sparse (`sparse`, from [`sparse_bottoms`]): on the
-/// base edge's segment under each place, one vertex under every revealer
-/// crease of that wall's top edge, farther than `gap` (mm) from the
-/// segment's ends. Below a crease, every triangle fanned over the convex
-/// lens arcs on either side faces out. Returned as (base row, base lens k,
-/// parameter t), t interpolated along the segment; the vertex is then
-/// solved onto the lens at that t, exactly.
+/// wall folds or fans into slivers (`sparse`, from [`sparse_bottoms`]):
+/// on that wall, one base vertex under every revealer crease of its top
+/// edge that has none within [`UNDER_CREASE_MM`]. Below a crease, every
+/// triangle fanned over the convex lens arcs on either side faces out.
+/// Every crease, not only those near a defect: where the wall is a few
+/// µm high and the surface slopes, a lens span with no base vertex under
+/// it sends the zip out of step for millimetres, and its folds show far
+/// from their cause (found-ec8e1532e484370a: 2.5 mm, 0.83 nm slivers).
+/// Returned as (base row, base lens k, parameter t), t interpolated along
+/// the base edge's segment under the crease; the vertex is then solved
+/// onto the lens at that t, exactly.
 pub(super) fn base_vertices_under_creases(
     dm: &DeviceMesh,
     (base_rows, base_offsets): (&[BaseRow], &[u32]),
     sparse: &[(Side, f64)],
-    gap: f64,
 ) -> Vec<(usize, i64, f64)> {
     let pos = &dm.mesh.positions;
     let last_row = dm.revealer_rows.len() - 1;
     let mut added = Vec::new();
-    for &(side, x) in sparse {
+    for side in [Side::Front, Side::Back] {
+        if !sparse.iter().any(|&(s, _)| s == side) {
+            continue;
+        }
         let (r, top_row) = match side {
             Side::Front => (0, 0),
             _ => (base_rows.len() - 1, last_row),
         };
         let row = &base_rows[r];
         let at = |i: u32| (i + base_offsets[r]) as usize;
-        let segment = row.lenses.iter().find_map(|(&k, poly)| {
-            poly.windows(2).find_map(|w| {
-                let (xa, xb) = (pos[at(w[0])].x, pos[at(w[1])].x);
-                (xa <= x && x <= xb).then_some((k, w[0], w[1], xa, xb))
-            })
-        });
-        let Some((k, ia, ib, xa, xb)) = segment else {
-            continue;
-        };
-        let lens = LensRef::Base(k);
-        let t = |i: u32| dm.origins[at(i)].params_on(lens).map(|p| p.x);
-        let (Some(ta), Some(tb)) = (t(ia), t(ib)) else {
-            continue;
-        };
         for lens_i in 0..dm.revealer_columns.len() {
             let xc = pos[dm.revealer_vertex(top_row, lens_i, 0) as usize].x;
-            if xc > xa + gap && xc < xb - gap {
+            let segment = row.lenses.iter().find_map(|(&k, poly)| {
+                poly.windows(2).find_map(|w| {
+                    let (xa, xb) = (pos[at(w[0])].x, pos[at(w[1])].x);
+                    (xa <= xc && xc <= xb).then_some((k, w[0], w[1], xa, xb))
+                })
+            });
+            let Some((k, ia, ib, xa, xb)) = segment else {
+                continue;
+            };
+            if xc <= xa + UNDER_CREASE_MM || xc >= xb - UNDER_CREASE_MM {
+                continue;
+            }
+            let lens = LensRef::Base(k);
+            let t = |i: u32| dm.origins[at(i)].params_on(lens).map(|p| p.x);
+            if let (Some(ta), Some(tb)) = (t(ia), t(ib)) {
                 added.push((r, k, ta + (xc - xa) / (xb - xa) * (tb - ta)));
             }
         }
