@@ -20,7 +20,7 @@ use glam::{DMat3, DVec3};
 use moirecast_mold::{ChannelAxis, ChannelShape};
 use truck_modeling::{
     BSplineCurve, Curve, KnotVec, Line, NurbsCurve, NurbsSurface, ParametricSurface,
-    ParametricSurface3D, RevolutedCurve, SearchNearestParameter, Vector3, Vector4,
+    ParametricSurface3D, RevolutedCurve, Vector3, Vector4,
 };
 
 /// A channel's frame: a point of its axis (position 0), the axis's unit
@@ -235,8 +235,9 @@ pub(crate) fn section_arc(c: &ChannelShape, h: f64, pts: &[DVec3]) -> Curve {
 pub(crate) enum Other<'a> {
     /// Where this function (of roughly unit gradient) is 0.
     Implicit(&'a dyn Fn(DVec3) -> f64),
-    /// A NURBS lens surface.
-    Lens(&'a NurbsSurface<Vector4>),
+    /// A NURBS lens surface, and how far (mm) the edge's mesh points
+    /// may lie from it: the tolerance.
+    Lens(&'a NurbsSurface<Vector4>, f64),
 }
 
 /// How many Newton or secant steps a solve takes at most.
@@ -282,10 +283,8 @@ pub(crate) fn solve_on_side(
                 Err(fail())
             }
         }
-        Other::Lens(s) => {
-            let (mut u, mut v) = s
-                .search_nearest_parameter(point3(p), None, 100)
-                .ok_or_else(fail)?;
+        Other::Lens(s, within) => {
+            let (mut u, mut v) = crate::solid::lens_params(s, p, *within);
             let mut h = h0;
             let d3 = |v: Vector3| DVec3::new(v.x, v.y, v.z);
             for _ in 0..SOLVE_STEPS {

@@ -40,8 +40,8 @@ use rayon::prelude::*;
 use std::collections::HashMap;
 use truck_modeling::{
     BSplineCurve, BSplineSurface, Curve, Cut, Face, KnotVec, Line, Matrix4, NurbsSurface,
-    ParametricSurface, ParametricSurface3D, Plane, Point3, Processor, RevolutedCurve,
-    SearchNearestParameter, Solid, Surface, Transformed, Vector3, Vector4, Wire,
+    ParametricSurface, ParametricSurface3D, Plane, Point3, Processor, RevolutedCurve, Solid,
+    Surface, Transformed, Vector3, Vector4, Wire,
 };
 
 /// What a face of a region's (or a half's) B-rep lies on.
@@ -325,11 +325,7 @@ fn build<'a>(
             return Ok(uv);
         }
         let p = mesh.positions[v as usize];
-        let (u, w) = posed_surfaces[&lens]
-            .search_nearest_parameter(point3(p), None, 100)
-            .ok_or_else(|| {
-                BrepError::Topology(format!("region vertex {v} has no parameters on {lens:?}"))
-            })?;
+        let (u, w) = crate::solid::lens_params(&posed_surfaces[&lens], p, frame.tolerance);
         // on a crease to round-off: exactly on it
         let snap = |t: f64| {
             if t.abs() < 1e-9 {
@@ -433,7 +429,7 @@ fn fit(
         match label {
             RegionFace::Lens(lens) => {
                 let s = &surfaces[&lens];
-                let (u, w) = s.search_nearest_parameter(point3(p), None, 100)?;
+                let (u, w) = crate::solid::lens_params(s, p, tolerance);
                 let q = s.subs(u, w);
                 Some(DVec3::new(q.x, q.y, q.z))
             }
@@ -901,7 +897,14 @@ fn channel_edge<'s>(
             let (_, _, surface) = lens_ends(lens)?;
             let solved = pts
                 .iter()
-                .map(|&p| channels::solve_on_side(shape, &f, &channels::Other::Lens(surface), p))
+                .map(|&p| {
+                    channels::solve_on_side(
+                        shape,
+                        &f,
+                        &channels::Other::Lens(surface, frame.tolerance),
+                        p,
+                    )
+                })
                 .collect::<Result<Vec<_>, _>>()?;
             return Ok(channels::piecewise_cubic(&solved, &[]));
         }
