@@ -391,7 +391,9 @@ fn run(cli: Cli) -> Result<()> {
                     done.triangles,
                     done.volume_mm3,
                     done.worst_surface_error_mm * 1e3,
-                    d.tolerance.mm() * 1e3,
+                    // the spec's own digits, without the mm → µm product's
+                    // round-off (1.068, not 1.0679999999999998)
+                    (d.tolerance.mm() * 1e9).round() / 1e6,
                     done.checks
                 );
                 print_written(&done.written, done.bytes, started);
