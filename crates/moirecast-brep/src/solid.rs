@@ -72,30 +72,27 @@ pub(crate) fn point3(p: DVec3) -> Point3 {
 
 /// The parameters of the point of a lens `surface` nearest `p`, a point
 /// `within` (mm) of it. truck's Newton search from its own 50 × 50
-/// presearch is taken where it ends inside the surface's domain and
-/// within that distance. Where it does not, the answer is the nearest of
-/// that search, the same search started from the nearest point of a grid
-/// with [`SAMPLES_PER_SPAN`] samples in every knot span, and that grid
-/// point itself. Along a profile of short wavelength a base lens waves
-/// across its stations faster than 50 samples see: the presearch starts a
-/// wave away, and Newton either diverges or leaves the domain, where the
-/// surface extrapolates (found-00f7846f67596c21: rings 0.41 mm apart, 50
-/// samples 0.8 mm apart, and a "nearest" point at u = 324 on a lens whose
-/// u runs over [0, 1], 4.8 mm away).
+/// presearch is taken where it ends within that distance (a point past a
+/// crease ends a hair outside the domain, on the surface's extension,
+/// which is as good). Where it does not, the answer is the nearest of
+/// that search and, clamped into the domain, the same search started
+/// from the nearest point of a grid with [`SAMPLES_PER_SPAN`] samples in
+/// every knot span, and that grid point. Along a profile of short
+/// wavelength a base lens waves across its stations faster than 50
+/// samples see: the presearch starts a wave away, and Newton either
+/// diverges or leaves the domain, where the surface extrapolates
+/// (found-00f7846f67596c21: rings 0.41 mm apart, 50 samples 0.8 mm
+/// apart, and a "nearest" point at u = 324 on a lens whose u runs over
+/// [0, 1], 4.8 mm away).
 pub(crate) fn lens_params(surface: &NurbsSurface<Vector4>, p: DVec3, within: f64) -> (f64, f64) {
     let target = point3(p);
-    let ((u0, u1), (v0, v1)) = surface.range_tuple();
-    let inside = |(u, v): (f64, f64)| {
-        let slack = 1e-9;
-        u0 - slack <= u && u <= u1 + slack && v0 - slack <= v && v <= v1 + slack
-    };
     let distance = |(u, v): (f64, f64)| surface.subs(u, v).distance(target);
-    let first = surface
-        .search_nearest_parameter(target, None, 100)
-        .filter(|&uv| inside(uv));
+    let first = surface.search_nearest_parameter(target, None, 100);
     if let Some(uv) = first.filter(|&uv| distance(uv) <= within) {
         return uv;
     }
+    let ((u0, u1), (v0, v1)) = surface.range_tuple();
+    let clamp = |(u, v): (f64, f64)| (u.clamp(u0, u1), v.clamp(v0, v1));
     let samples = |knots: &KnotVec| {
         let mut ts: Vec<f64> = knots
             .windows(2)
@@ -118,8 +115,8 @@ pub(crate) fn lens_params(surface: &NurbsSurface<Vector4>, p: DVec3, within: f64
         .unwrap_or((u0, v0));
     let refined = surface
         .search_nearest_parameter(target, Some(grid), 100)
-        .filter(|&uv| inside(uv));
-    [first, refined, Some(grid)]
+        .map(clamp);
+    [first.map(clamp), refined, Some(grid)]
         .into_iter()
         .flatten()
         .min_by(nearest)
