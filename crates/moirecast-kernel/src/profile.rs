@@ -5,6 +5,7 @@
 //! surfaces inherit e's smoothness. Sampled profiles use Catmull-Rom bicubic
 //! interpolation, which is C¹.
 
+use crate::grid::{catmull_rom, CubicGrid};
 use glam::DVec2;
 
 /// A grey image handed to the kernel: luminance in [0, 1], composited over
@@ -63,8 +64,8 @@ impl Profile {
             // leaves the blur no room: the image's edges bend within one
             // cell (found-a0544021cc9fde75: 0.22 mm cells, blur 0.07 mm,
             // creases bending over 0.4 mm)
-            Profile::Sampled(s) if s.blur < 2.0 * s.spacing => Some(0.5 * s.spacing),
-            Profile::Sampled(s) => Some(2.0 * s.spacing),
+            Profile::Sampled(s) if s.blur < 2.0 * s.spacing() => Some(0.5 * s.spacing()),
+            Profile::Sampled(s) => Some(2.0 * s.spacing()),
         }
     }
 
@@ -81,7 +82,7 @@ impl Profile {
     pub fn coarsest_survey_cell_mm(&self) -> Option<f64> {
         let detail = self.detail_mm()?;
         Some(match self {
-            Profile::Sampled(s) if s.blur >= 2.0 * s.spacing => (2.0 * detail).min(0.5 * s.blur),
+            Profile::Sampled(s) if s.blur >= 2.0 * s.spacing() => (2.0 * detail).min(0.5 * s.blur),
             Profile::Sampled(_) => 2.0 * detail,
             _ => 0.5 * detail,
         })
@@ -149,43 +150,9 @@ impl Profile {
 /// A regular grid of elevation values with Catmull-Rom interpolation.
 #[derive(Clone, Debug)]
 pub struct SampledProfile {
-    origin: DVec2,
-    spacing: f64,
+    grid: CubicGrid,
     /// The Gaussian blur's σ (mm) the values were smoothed with.
     blur: f64,
-    nx: usize,
-    ny: usize,
-    values: Vec<f64>,
-}
-
-/// Where (x, y) falls in a [`SampledProfile`]'s grid: the stencil's
-/// corner (i − 1, j − 1), whether it lies wholly inside the grid, and the
-/// Catmull-Rom weights and their derivatives along x and y.
-struct Stencil {
-    i: usize,
-    j: usize,
-    interior: bool,
-    wx: [f64; 4],
-    dx: [f64; 4],
-    wy: [f64; 4],
-    dy: [f64; 4],
-}
-
-fn catmull_rom(t: f64) -> ([f64; 4], [f64; 4]) {
-    let (t2, t3) = (t * t, t * t * t);
-    let w = [
-        0.5 * (-t3 + 2.0 * t2 - t),
-        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
-        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
-        0.5 * (t3 - t2),
-    ];
-    let d = [
-        0.5 * (-3.0 * t2 + 4.0 * t - 1.0),
-        0.5 * (9.0 * t2 - 10.0 * t),
-        0.5 * (-9.0 * t2 + 8.0 * t + 1.0),
-        0.5 * (3.0 * t2 - 2.0 * t),
-    ];
-    (w, d)
 }
 
 /// Most grid cells a sampled profile holds (4 M: 32 MB of values).
@@ -348,118 +315,36 @@ impl SampledProfile {
             gaussian_blur(&mut values, nx, ny, blur / spacing);
         }
         Ok(SampledProfile {
-            origin,
-            spacing,
+            grid: CubicGrid::new(origin, spacing, nx, ny, values),
             blur,
-            nx,
-            ny,
-            values,
         })
     }
 
     /// Grid spacing (mm).
     pub fn spacing(&self) -> f64 {
-        self.spacing
-    }
-
-    /// The grid value at node (i, j), the stencil's one node beyond the
-    /// border mirrored about it: the interpolant's slope across the border
-    /// is then 0, as it is beyond, where the border value holds. A clamped
-    /// node left a kink there, which a base reaching past the grid (a deep
-    /// base under a steep slope: found-14a20941fd0557ea, 4.6 mm past the
-    /// layout) bent over within one row: 2.7 times the tolerance.
-    fn at(&self, i: isize, j: isize) -> f64 {
-        let mirrored = |k: isize, n: usize| {
-            let last = n as isize - 1;
-            let k = if k < 0 {
-                -k
-            } else if k > last {
-                2 * last - k
-            } else {
-                k
-            };
-            k.clamp(0, last) as usize
-        };
-        self.values[mirrored(j, self.ny) * self.nx + mirrored(i, self.nx)]
+        self.grid.spacing
     }
 
     /// (e, ∇e) at (x, y) by Catmull-Rom interpolation (C¹).
     pub fn eval(&self, x: f64, y: f64) -> (f64, DVec2) {
-        let s = self.stencil(x, y);
-        let (mut e, mut ex, mut ey) = (0.0, 0.0, 0.0);
-        for b in 0..4 {
-            let row = self.stencil_row(&s, b);
-            let (mut r, mut rd) = (0.0, 0.0);
-            for ((w, d), v) in s.wx.iter().zip(s.dx).zip(row) {
-                r += w * v;
-                rd += d * v;
-            }
-            e += s.wy[b] * r;
-            ex += s.wy[b] * rd;
-            ey += s.dy[b] * r;
-        }
-        (e, DVec2::new(ex, ey) / self.spacing)
+        self.grid.eval(x, y)
     }
 
     /// e at (x, y), as [`SampledProfile::eval`] gives it, without the
     /// gradient (a frame's elevation phase per pixel).
     pub fn value(&self, x: f64, y: f64) -> f64 {
-        let s = self.stencil(x, y);
-        let mut e = 0.0;
-        for b in 0..4 {
-            let row = self.stencil_row(&s, b);
-            let mut r = 0.0;
-            for (w, v) in s.wx.iter().zip(row) {
-                r += w * v;
-            }
-            e += s.wy[b] * r;
-        }
-        e
-    }
-
-    /// The 4 × 4 Catmull-Rom stencil around (x, y).
-    fn stencil(&self, x: f64, y: f64) -> Stencil {
-        let fx = ((x - self.origin.x) / self.spacing).clamp(0.0, (self.nx - 1) as f64);
-        let fy = ((y - self.origin.y) / self.spacing).clamp(0.0, (self.ny - 1) as f64);
-        // fx, fy ≥ 0, so truncation is floor (and avoids a libm call)
-        let (i, j) = (
-            (fx as usize).min(self.nx - 2) as f64,
-            (fy as usize).min(self.ny - 2) as f64,
-        );
-        let (wx, dx) = catmull_rom(fx - i);
-        let (wy, dy) = catmull_rom(fy - j);
-        let (i, j) = (i as usize, j as usize);
-        Stencil {
-            i,
-            j,
-            interior: i >= 1 && j >= 1 && i + 2 < self.nx && j + 2 < self.ny,
-            wx,
-            dx,
-            wy,
-            dy,
-        }
-    }
-
-    /// Row `b` of the stencil's values: in the interior a slice of the
-    /// grid, at the border clamped to it.
-    fn stencil_row(&self, s: &Stencil, b: usize) -> [f64; 4] {
-        if s.interior {
-            let start = (s.j - 1 + b) * self.nx + s.i - 1;
-            return self.values[start..start + 4].try_into().unwrap();
-        }
-        std::array::from_fn(|a| {
-            self.at(s.i as isize - 1 + a as isize, s.j as isize - 1 + b as isize)
-        })
+        self.grid.value(x, y)
     }
 
     fn max_slope_x(&self, half_w: f64, half_h: f64) -> (f64, DVec2) {
         use rayon::prelude::*;
+        let g = &self.grid;
         // On a grid row the interpolant is a 1-D Catmull-Rom spline in x, whose
         // derivative is piecewise quadratic: sampling at nodes and half-cells
         // finds its maximum to within a few per cent for a blurred profile;
         // the steepness rule keeps a 10 % margin.
-        let col = |x: f64| ((x - self.origin.x) / self.spacing).clamp(0.0, (self.nx - 1) as f64);
-        let row = |y: f64| ((y - self.origin.y) / self.spacing).clamp(0.0, (self.ny - 1) as f64);
+        let col = |x: f64| ((x - g.origin.x) / g.spacing).clamp(0.0, (g.nx - 1) as f64);
+        let row = |y: f64| ((y - g.origin.y) / g.spacing).clamp(0.0, (g.ny - 1) as f64);
         let (i0, i1) = (col(-half_w).floor() as usize, col(half_w).ceil() as usize);
         let (j0, j1) = (row(-half_h).floor() as usize, row(half_h).ceil() as usize);
         let (_, d_half) = catmull_rom(0.5);
@@ -467,20 +352,20 @@ impl SampledProfile {
             .into_par_iter()
             .map(|j| {
                 let mut best = (0.0, DVec2::ZERO);
-                let y = self.origin.y + j as f64 * self.spacing;
-                for i in i0..i1.min(self.nx - 1) {
-                    let v = |a: isize| self.at(i as isize + a, j as isize);
-                    let at_node = (v(1) - v(-1)) / (2.0 * self.spacing);
+                let y = g.origin.y + j as f64 * g.spacing;
+                for i in i0..i1.min(g.nx - 1) {
+                    let v = |a: isize| g.at(i as isize + a, j as isize);
+                    let at_node = (v(1) - v(-1)) / (2.0 * g.spacing);
                     let at_half = (d_half[0] * v(-1)
                         + d_half[1] * v(0)
                         + d_half[2] * v(1)
                         + d_half[3] * v(2))
-                        / self.spacing;
-                    for (g, off) in [(at_node.abs(), 0.0), (at_half.abs(), 0.5)] {
-                        if g > best.0 {
+                        / g.spacing;
+                    for (slope, off) in [(at_node.abs(), 0.0), (at_half.abs(), 0.5)] {
+                        if slope > best.0 {
                             best = (
-                                g,
-                                DVec2::new(self.origin.x + (i as f64 + off) * self.spacing, y),
+                                slope,
+                                DVec2::new(g.origin.x + (i as f64 + off) * g.spacing, y),
                             );
                         }
                     }
@@ -634,7 +519,7 @@ mod tests {
             12.0,
         )
         .unwrap();
-        let edge = p.origin.y;
+        let edge = p.grid.origin.y;
         assert!(edge <= -15.0 - 12.0, "the grid reaches {edge}");
         let x = 3.0;
         let (held, g) = p.eval(x, edge - 5.0);
@@ -642,7 +527,7 @@ mod tests {
         assert_eq!(held, p.eval(x, edge).0);
         // one-sided slope into the border: shrinking with the distance
         let slope = |h: f64| (p.eval(x, edge + h).0 - p.eval(x, edge).0) / h;
-        let (near, far) = (slope(1e-4 * p.spacing), slope(p.spacing));
+        let (near, far) = (slope(1e-4 * p.spacing()), slope(p.spacing()));
         assert!(far.abs() > 1e-3, "e is flat at the border: {far}");
         assert!(near.abs() <= 1e-3 * far.abs(), "{near} against {far}");
     }
