@@ -12,6 +12,25 @@ use std::time::Instant;
 mod common;
 use common::median;
 
+/// Medians of `Design::new` on the spec's parameters with the view
+/// compensation and without it (ms): what tracing C costs.
+fn view_compensation_cost(spec_path: &str, runs: usize) -> (f64, f64) {
+    let spec = moirecast_spec::load(std::path::Path::new(spec_path)).unwrap();
+    let time = |compensate: bool| {
+        let mut params = spec.design.params.clone();
+        params.view.compensate = compensate;
+        let times = (0..runs)
+            .map(|_| {
+                let t = Instant::now();
+                moirecast_kernel::Design::new(params.clone()).unwrap();
+                t.elapsed().as_secs_f64()
+            })
+            .collect();
+        median(times) * 1e3
+    };
+    (time(true), time(false))
+}
+
 fn main() {
     let (spec_path, runs) = common::spec_and_runs(9);
     let out = std::env::temp_dir().join(format!("moirecast-bench-{}", std::process::id()));
@@ -64,5 +83,10 @@ fn main() {
     );
     println!("mesh + STL        {:8.1} ms   (goal < 300 ms)", ms(total));
     println!("report checks     {:8.1} ms", ms(checks_t));
+    let (with_c, without_c) = view_compensation_cost(&spec_path, runs);
+    println!(
+        "view compensation {:8.1} ms   (Design::new {with_c:.1} ms with C, {without_c:.1} ms without)",
+        with_c - without_c
+    );
     let _ = std::fs::remove_dir_all(&out);
 }

@@ -152,7 +152,7 @@ fn best_over_tilts(
     let sections = options.tracer.sections(design, options.size);
     let sections_alone = sections
         .as_ref()
-        .filter(|_| options.sections_trace_every_frame())
+        .filter(|_| options.sections_trace_every_frame(design))
         .and_then(|s| s.bounds());
     let (dm, mesh, absorbing);
     let scene = match sections_alone {
@@ -167,7 +167,7 @@ fn best_over_tilts(
     let mut best: Option<BestFrame> = None;
     let (mut fidelity, mut local_fidelity) = (0.0f64, 0.0f64);
     for &tilt in &options.tilts_deg {
-        let view = options.view(tilt, lighting);
+        let view = options.view(design, tilt, lighting);
         let (f, global) = render_scored(design, &scene, sections.as_ref(), view);
         fidelity = fidelity.max(global);
         local_fidelity = local_fidelity.max(f.local_fidelity());

@@ -268,6 +268,9 @@ fn start(run: &RunArgs) -> Result<(Bars, std::time::Instant, moirecast_spec::Spe
     if run.allow_large {
         spec.design.mesh_budget = moirecast_kernel::MeshBudget::UNLIMITED;
     }
+    for w in moirecast::report::view_warnings(spec.design.view.as_ref()) {
+        eprintln!("warning: {w}");
+    }
     Ok((bars, started, spec))
 }
 

@@ -186,6 +186,7 @@ pub struct MoldReport {
     pub moirecast: &'static str,
     pub spec: String,
     pub design: DesignEcho,
+    pub view: crate::report::ViewReport,
     pub mold: MoldParams,
     pub frame: FrameReport,
     pub block_min: [f64; 3],
@@ -268,6 +269,7 @@ pub fn mold_report(
         moirecast: env!("CARGO_PKG_VERSION"),
         spec: crate::report::spec_name(spec),
         design: design_echo(spec),
+        view: crate::report::ViewReport::of(&spec.design),
         mold: spec.mold.clone(),
         frame: FrameReport {
             flip: spec.mold.flip,

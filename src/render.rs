@@ -148,11 +148,22 @@ impl RenderOptions {
     /// Whether the sections trace every pixel the device covers in these
     /// frames: the branching integrator through a dual-lens device's
     /// sections, an orthographic camera, no tilt along.
-    pub fn sections_trace_every_frame(&self) -> bool {
+    pub fn sections_trace_every_frame(&self, design: &Design) -> bool {
         self.tracer == Tracer::Sections
             && matches!(self.integrator, Integrator::Branching(_))
-            && self.camera_distance_mm.is_none()
-            && self.tilt_along_deg == 0.0
+            && self.camera_distance(design).is_none()
+            && self.tilt_along(design) == 0.0
+    }
+
+    /// The eye's distance of a perspective camera (mm): `--camera-distance`,
+    /// else the design view's (`[view] distance`); `None`: orthographic.
+    pub fn camera_distance(&self, design: &Design) -> Option<f64> {
+        self.camera_distance_mm.or(design.params.view.distance)
+    }
+
+    /// The tilt about x (rad): the design view's and `--tilt-along`.
+    fn tilt_along(&self, design: &Design) -> f64 {
+        design.params.view.tilt_along + self.tilt_along_deg.to_radians()
     }
 
     /// Where each pixel's rays go: `samples`² fixed lens phases for the
@@ -165,15 +176,17 @@ impl RenderOptions {
         }
     }
 
-    /// The view at `tilt_deg` about the lens axis, in `lighting`.
-    pub fn view(&self, tilt_deg: f64, lighting: Lighting) -> View {
+    /// The view at `tilt_deg` about the lens axis from the design view
+    /// (`[view]`: tilt 0 is the view the base is compensated for), in
+    /// `lighting`.
+    pub fn view(&self, design: &Design, tilt_deg: f64, lighting: Lighting) -> View {
         View {
             width: self.size,
             height: self.size,
             sampling: self.sampling(),
-            tilt_across: tilt_deg.to_radians(),
-            tilt_along: self.tilt_along_deg.to_radians(),
-            camera: match self.camera_distance_mm {
+            tilt_across: design.params.view.tilt + tilt_deg.to_radians(),
+            tilt_along: self.tilt_along(design),
+            camera: match self.camera_distance(design) {
                 None => Camera::Orthographic,
                 Some(distance) => Camera::Perspective { distance },
             },
@@ -280,12 +293,22 @@ fn gif(frames: &[Rgb8]) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
-pub fn run_render(
+/// One rendered frame and its METHOD §8 fidelity.
+pub struct RenderedFrame {
+    pub tilt_deg: f64,
+    pub frame: moirecast_render::frame::Frame,
+    pub fidelity: f64,
+}
+
+/// Renders `spec` at every tilt of `options`, handing each frame to
+/// `each` as it is done (a frame of 4096 px holds 670 MB): what `moirecast
+/// render` writes, before it is encoded.
+pub fn render_frames(
     spec: &Spec,
-    out: &Path,
     options: &RenderOptions,
     progress: &dyn Progress,
-) -> Result<RenderOutcome> {
+    each: &mut dyn FnMut(RenderedFrame) -> Result<()>,
+) -> Result<()> {
     let design = &spec.design;
     let lighting = options.lights.lighting(design)?;
     let dm = crate::mesh_spec(spec, progress)?;
@@ -294,7 +317,7 @@ pub fn run_render(
     progress.stage("rendering", options.tilts_deg.len() as u64);
     let (mesh, absorbing) = traced_mesh(design, &dm).context("building the traced bodies")?;
     let (lo, hi) = mesh.bounds();
-    if let Some(d) = options.camera_distance_mm {
+    if let Some(d) = options.camera_distance(design) {
         let reach = 0.5 * (hi - lo).length();
         anyhow::ensure!(
             d > reach,
@@ -306,35 +329,51 @@ pub fn run_render(
     // Frames the sections trace whole need no BVH: an empty scene frames
     // them as the mesh would.
     let scene = match sections.as_ref() {
-        Some(_) if options.sections_trace_every_frame() => Scene::framing((lo, hi)),
+        Some(_) if options.sections_trace_every_frame(design) => Scene::framing((lo, hi)),
         _ => Scene::with_absorbing(&mesh, absorbing),
     };
+    for &tilt_deg in &options.tilts_deg {
+        let view = options.view(design, tilt_deg, lighting);
+        let (frame, fidelity) = render_scored(design, &scene, sections.as_ref(), view);
+        progress.tick(1);
+        each(RenderedFrame {
+            tilt_deg,
+            frame,
+            fidelity,
+        })?;
+    }
+    Ok(())
+}
+
+pub fn run_render(
+    spec: &Spec,
+    out: &Path,
+    options: &RenderOptions,
+    progress: &dyn Progress,
+) -> Result<RenderOutcome> {
+    let design = &spec.design;
+    let lighting = options.lights.lighting(design)?;
     let mut files = OutputSet::new();
     let (mut images, mut reports) = (Vec::new(), Vec::new());
     let mut period_px = 0.0;
-    for (i, &tilt) in options.tilts_deg.iter().enumerate() {
-        let (frame, fidelity) = render_scored(
-            design,
-            &scene,
-            sections.as_ref(),
-            options.view(tilt, lighting),
-        );
+    render_frames(spec, options, progress, &mut |r| {
+        let frame = &r.frame;
         period_px = frame.period_px;
         let image = to_rgb8(frame.width, frame.height, &frame.rgb);
-        let name = format!("frame-{i:02}.png");
+        let name = format!("frame-{:02}.png", reports.len());
         files.add(&name, png(&image)?);
         reports.push(FrameReport {
             file: name,
-            tilt_deg: tilt,
-            fidelity,
+            tilt_deg: r.tilt_deg,
+            fidelity: r.fidelity,
             local_fidelity: frame.local_fidelity(),
             contrast: frame.level_line_contrast(),
             mean_luminance: frame.mean_luminance(),
             dropped_weight: frame.dropped_weight,
         });
         images.push(image);
-        progress.tick(1);
-    }
+        Ok(())
+    })?;
     let labelled: Vec<(Rgb8, String)> = images
         .iter()
         .zip(&reports)
@@ -363,7 +402,7 @@ pub fn run_render(
         seed: options.seed,
         pixels_per_period: period_px,
         tilt_along_deg: options.tilt_along_deg,
-        camera: match options.camera_distance_mm {
+        camera: match options.camera_distance(design) {
             None => "orthographic".into(),
             Some(d) => format!("perspective, eye {d} mm from the device's centre"),
         },

@@ -150,8 +150,10 @@ pub struct DeviceReport {
     pub files: BTreeMap<String, FileReport>,
     pub mesh: MeshReport,
     pub lenses: LensReport,
+    /// The base's shift E − C (C: the view compensation).
     pub base_shift_mm: MinMax,
     pub base_shift_periods: MinMax,
+    pub view: ViewReport,
     /// The device as a B-rep (dual-lens devices).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub brep: Option<BrepReport>,
@@ -163,6 +165,83 @@ pub struct DeviceReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub crosscheck: Option<moirecast_brep::CrossCheck>,
     pub checks: Vec<CheckReport>,
+}
+
+/// The design view and the base's compensation for it (docs/decisions.md,
+/// "The view-compensated base").
+#[derive(Serialize)]
+pub struct ViewReport {
+    /// Tilts about y (across the lenses) and x, as `render --tilts` and
+    /// `--tilt-along` take them.
+    pub tilt_deg: f64,
+    pub tilt_along_deg: f64,
+    /// The view direction (unit, from the eye into the device).
+    pub direction: [f64; 3],
+    /// The eye's distance from the device's centre; `null`: orthographic.
+    pub distance_mm: Option<f64>,
+    /// Whether the base is compensated for the design view (on a plane
+    /// seen straight down C ≡ 0: nothing moves).
+    pub compensated: bool,
+    /// Largest |C| over the layout, in periods (0 where C ≡ 0: a plane seen
+    /// straight down), whether the base is compensated or not.
+    pub max_offset_periods: f64,
+    /// Largest |∂C/∂u| over the layout.
+    pub max_offset_slope: f64,
+    /// C's grid and the interpolant's largest distance from the traced C
+    /// at the grid's cell centres over the layout.
+    pub offset_grid_mm: Option<f64>,
+    pub offset_fit_um: Option<f64>,
+    /// The largest angle between the view and a lens axis, across the
+    /// lenses, and where (layout mm).
+    pub max_view_angle_deg: f64,
+    pub max_view_angle_at_mm: [f64; 2],
+    /// Past this angle a lens keeps less than three quarters of its
+    /// straight-on contrast (`view-angle` warns).
+    pub keeps_contrast_deg: f64,
+    /// Named warnings: the design builds, but does not show what a user
+    /// expects everywhere.
+    pub warnings: Vec<String>,
+}
+
+impl ViewReport {
+    pub fn of(design: &moirecast_kernel::Design) -> Self {
+        let view = &design.params.view;
+        let c = design.view_compensation_traced();
+        let t = design.params.period;
+        let (angle, at) = c.as_ref().map_or((0.0, [0.0, 0.0]), |c| {
+            (c.max_angle.0.to_degrees(), c.max_angle.1.to_array())
+        });
+        ViewReport {
+            tilt_deg: view.tilt.to_degrees(),
+            tilt_along_deg: view.tilt_along.to_degrees(),
+            direction: view.direction().to_array(),
+            distance_mm: view.distance,
+            compensated: view.compensate,
+            max_offset_periods: c.as_ref().map_or(0.0, |c| c.max_abs_layout_mm / t),
+            max_offset_slope: c.as_ref().map_or(0.0, |c| c.max_slope),
+            offset_grid_mm: c.as_ref().map(|c| c.spacing()),
+            offset_fit_um: c.as_ref().map(|c| 1e3 * c.fit_error_mm),
+            max_view_angle_deg: angle,
+            max_view_angle_at_mm: at,
+            keeps_contrast_deg: moirecast_kernel::view::KEEPS_CONTRAST_DEG,
+            warnings: view_warnings(c.as_ref()),
+        }
+    }
+}
+
+/// The design's named warnings about its view: `view-angle` where the
+/// design view meets a lens past the angle at which it keeps its contrast.
+pub fn view_warnings(c: Option<&moirecast_kernel::ViewCompensation>) -> Vec<String> {
+    let limit = moirecast_kernel::view::KEEPS_CONTRAST_DEG;
+    match c {
+        Some(c) if c.max_angle.0.to_degrees() > limit => vec![format!(
+            "view-angle: the design view meets the lenses at up to {:.1}° from their axes (at layout ({:.1}, {:.1}) mm); past {limit}° a lens keeps less than three quarters of its straight-on contrast, so the level lines fade there. Fix: a larger surface.radius, a smaller layout, or a view.tilt towards that place",
+            c.max_angle.0.to_degrees(),
+            c.max_angle.1.x,
+            c.max_angle.1.y
+        )],
+        _ => vec![],
+    }
 }
 
 /// The device as a B-rep solid (`device.step`).
@@ -299,6 +378,7 @@ pub fn device_report(
             sag_mm: ls.sag.into(),
             focal_depth_mm: ls.focal_depth.into(),
         },
+        view: ViewReport::of(d),
         base_shift_mm: shift.into(),
         base_shift_periods: MinMax {
             min: shift.min / t,

@@ -218,6 +218,50 @@ fn outputs_are_byte_identical_across_runs() {
     }
 }
 
+/// On a plane seen straight down the view compensation is zero by
+/// symmetry: the device and its mold are byte-identical to the
+/// uncompensated base's (`view.compensate = false`), and report.json
+/// differs only in saying which was asked for. On the saddle they differ.
+#[test]
+fn a_plane_seen_straight_down_builds_the_uncompensated_base() {
+    let plane = SMALL.replace("kind = \"saddle\"\nradius = 40.0", "kind = \"plane\"");
+    let uncompensated = |spec: &str| format!("{spec}[view]\ncompensate = false\n");
+    let build = |name: &str, spec: &str| {
+        let dir = scratch(name);
+        let (ok, err, out) = run_command("mold", spec, &dir);
+        assert!(ok, "{err}");
+        let read = |f: &str| std::fs::read(out.join(f)).unwrap();
+        let files: Vec<(String, Vec<u8>)> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .filter(|f| f != "report.json")
+            .map(|f| (f.clone(), read(&f)))
+            .collect();
+        let report: serde_json::Value = serde_json::from_slice(&read("report.json")).unwrap();
+        (dir, files, report)
+    };
+    let (_a, mut on, on_report) = build("plane-compensated", &plane);
+    let (_b, mut off, off_report) = build("plane-uncompensated", &uncompensated(&plane));
+    on.sort();
+    off.sort();
+    assert!(on.len() >= 10, "{} files", on.len());
+    for ((name, x), (_, y)) in on.iter().zip(&off) {
+        assert!(x == y, "{name} differs on a plane");
+    }
+    assert_eq!(on_report["view"]["compensated"], true);
+    assert_eq!(off_report["view"]["compensated"], false);
+    assert_eq!(on_report["view"]["max_offset_periods"], 0.0);
+    let device = |spec: &str, name: &str| {
+        let dir = scratch(name);
+        let (ok, err, out) = run(spec, &dir);
+        assert!(ok, "{err}");
+        (std::fs::read(out.join("device.stl")).unwrap(), dir)
+    };
+    let (saddle_on, _c) = device(SMALL, "saddle-compensated");
+    let (saddle_off, _d) = device(&uncompensated(SMALL), "saddle-uncompensated");
+    assert!(saddle_on != saddle_off, "the saddle's base moves");
+}
+
 /// `--mesher brep`: truck-meshalgo's tessellation of the B-rep becomes
 /// device.stl once it is cross-checked. A plane without base shift has no
 /// trimmed faces and passes (at 2 µm); the saddle's trimmed faces do not,
@@ -413,10 +457,12 @@ fn explore_scores_the_design_space_and_writes_the_best_spec() {
         .starts_with(b"\x89PNG"));
 }
 
-/// On the reference, explore's best cell keeps more than half the level-line
-/// contrast of the same optics on a flat sheet, at d = D_s, and the
-/// defocused cell (a = 0, d = 0.6 D_s) clearly less (docs/decisions.md).
-/// Measured at the default 96 px: 0.589 at a = 0, d = D_s; 0.406 defocused.
+/// On the reference, with its base compensated for the view, explore's best
+/// cell keeps most of the level-line contrast of the same optics on a flat
+/// sheet; the paper's cell (a = 0, d = D_s) is on the plateau around it,
+/// and the defocused cell (a = 0, d = 0.6 D_s) clearly below
+/// (docs/decisions.md). Measured at the default 96 px: 0.910 at a = 0.5,
+/// d = 0.8 D_s; 0.890 at a = 0, d = D_s; 0.510 defocused.
 #[test]
 fn explore_on_the_reference_keeps_most_of_the_flat_sheets_contrast() {
     let dir = scratch("explore-reference");
@@ -429,8 +475,12 @@ fn explore_on_the_reference_keeps_most_of_the_flat_sheets_contrast() {
     let cells = report["cells"].as_array().unwrap();
     let best = &cells[report["best"].as_u64().unwrap() as usize];
     let kept = |c: &serde_json::Value| c["kept_contrast"].as_f64().unwrap();
-    assert!(kept(best) >= 0.5, "{best}");
-    assert_eq!(best["d_over_ds"].as_f64(), Some(1.0), "{best}");
+    assert!(kept(best) >= 0.8, "{best}");
+    let paper = cells
+        .iter()
+        .find(|c| c["a"].as_f64() == Some(0.0) && c["d_over_ds"].as_f64() == Some(1.0))
+        .unwrap();
+    assert!(kept(paper) >= 0.95 * kept(best), "{paper} against {best}");
     let defocused = cells
         .iter()
         .find(|c| c["a"].as_f64() == Some(0.0) && c["d_over_ds"].as_f64() == Some(0.6))

@@ -245,6 +245,9 @@ fn draw(rng: &mut Rng, with_mold: bool) -> String {
         }
     }
     writeln!(t, "blur = {}", num(rng.log(0.05, 8.0))).unwrap();
+    if rng.chance(0.3) {
+        draw_view(rng, &mut t);
+    }
     // [mesh]
     let tolerance = if rng.chance(0.85) {
         rng.log(5e-4, 0.03)
@@ -281,6 +284,25 @@ fn draw(rng: &mut Rng, with_mold: bool) -> String {
         }
     }
     t
+}
+
+/// A `[view]` table: mostly tilts a viewer takes, some past grazing the
+/// lenses, eyes near and far (some nearer than allowed), and the
+/// uncompensated base.
+fn draw_view(rng: &mut Rng, t: &mut String) {
+    writeln!(t, "[view]").unwrap();
+    for key in ["tilt", "tilt_along"] {
+        if rng.chance(0.5) {
+            let reach = if rng.chance(0.8) { 25.0 } else { 70.0 };
+            writeln!(t, "{key} = {}", num(rng.uniform(-reach, reach))).unwrap();
+        }
+    }
+    if rng.chance(0.4) {
+        writeln!(t, "distance = {}", num(rng.log(30.0, 5000.0))).unwrap();
+    }
+    if rng.chance(0.15) {
+        writeln!(t, "compensate = false").unwrap();
+    }
 }
 
 /// How one case ended.

@@ -139,19 +139,27 @@ fn work(spec: &Spec, queue: mpsc::Receiver<FrameJob>) {
                 continue;
             }
         };
+        // the sliders tilt from the design view: tilt 0 is the view the
+        // base is compensated for
+        let design_view = &design.params.view;
         let view = View {
             width: r.size,
             height: r.size,
             sampling: Sampling::LensPeriod(r.samples * r.samples),
-            tilt_across: r.tilt_deg.to_radians(),
-            tilt_along: r.along_deg.to_radians(),
-            camera: Camera::Orthographic,
+            tilt_across: design_view.tilt + r.tilt_deg.to_radians(),
+            tilt_along: design_view.tilt_along + r.along_deg.to_radians(),
+            camera: design_view
+                .distance
+                .map_or(Camera::Orthographic, |distance| Camera::Perspective {
+                    distance,
+                }),
             lighting,
             integrator: Integrator::default(),
             seed: 1,
         };
         let dual_lens = design.params.base.kind == BaseKind::DualLens;
-        let by_sections = dual_lens && r.along_deg == 0.0;
+        let by_sections =
+            dual_lens && view.tilt_along == 0.0 && view.camera == Camera::Orthographic;
         let section_set = if by_sections {
             sections
                 .entry(r.size)

@@ -5,7 +5,8 @@
 //
 // Copies the reference spec and its image into WORKDIR, starts
 // `moirecast studio` on a free port, and checks what a designer does:
-// the first frame arrives; the tilt slider changes the frame; afov = 200
+// the first frame arrives; the tilt slider changes the frame; the view
+// compensation toggles; afov = 200
 // is refused at its field, naming `lens.afov`; the 3D view orbits;
 // "Write device files" writes device.stl into the output folder. Saves a
 // screenshot of the page. Exits non-zero, saying why, on any failure.
@@ -75,6 +76,26 @@ try {
   await page.waitForTimeout(200);
   const after = await page.locator("#frame").screenshot();
   check(!before.equals(after), "moving the tilt slider changes the frame");
+
+  // the compensation toggle: off, the design is today's uncompensated base
+  // and the frame changes; on again, back to the design view's picture
+  const compensated = await page.locator("#frame").screenshot();
+  const revision = await page.evaluate(() => window.studio.revision);
+  const shown = await page.evaluate(() => window.studio.frames);
+  await page.locator("#compensate").uncheck();
+  await page.waitForFunction(
+    ([r, n]) => window.studio.revision > r && window.studio.frames > n,
+    [revision, shown],
+    { timeout: 60000 },
+  );
+  await page.waitForTimeout(200);
+  const uncompensated = await page.locator("#frame").screenshot();
+  const off = await (await page.request.get(url + "api/state")).json();
+  check(off.values.view && off.values.view.compensate === false && !compensated.equals(uncompensated),
+    "unticking the compensation builds the uncompensated base, and the frame changes");
+  await page.locator("#compensate").check();
+  await page.waitForFunction(() => document.getElementById("compensate").checked && window.studio.values.view.compensate === true, null, { timeout: 60000 });
+  check(true, "ticking it again compensates the base");
 
   // afov = 200 is refused at its field, naming the key
   await page.locator("#f-lens-afov").fill("200");

@@ -8,6 +8,7 @@ use crate::lens::ArcRule;
 use crate::profile::Profile;
 use crate::surface::PitchSurface;
 use crate::tolerance::Tolerance;
+use crate::view::{DesignView, ViewCompensation};
 use glam::{DVec2, DVec3};
 
 /// How revealer lens radii are chosen (METHOD §2).
@@ -84,6 +85,8 @@ pub struct DesignParams {
     pub base: BaseParams,
     pub profile: Profile,
     pub tolerance: f64,
+    /// The view the base is compensated for (docs/method.md).
+    pub view: DesignView,
 }
 
 impl DesignParams {
@@ -110,6 +113,7 @@ impl DesignParams {
             },
             profile: Profile::Flat,
             tolerance: 0.002,
+            view: DesignView::default(),
         }
     }
 }
@@ -233,6 +237,8 @@ pub struct Design {
     pub max_slope: f64,
     /// The largest mesh to make of it ([`MeshBudget::DEFAULT`] unless set).
     pub mesh_budget: MeshBudget,
+    /// The base's view compensation C (`None`: C ≡ 0).
+    pub view: Option<ViewCompensation>,
 }
 
 fn err(
@@ -308,6 +314,7 @@ impl Design {
             max_curvature: 0.0,
             max_slope: 0.0,
             mesh_budget: MeshBudget::DEFAULT,
+            view: None,
             standard,
             params: p,
         };
@@ -316,12 +323,16 @@ impl Design {
             design.surface().x_of_u(design.crease_u(n as i64)),
         );
         design.settle_margin(base_afov)?;
+        design.view = design.compute_view_compensation()?;
         design.validate_profile()?;
-        // Base creases that can reach the extended layout: φ = (u + W/2 − E)/T, E ∈ [0, A·T].
+        // Base creases that can reach the extended layout: φ = (u + W/2 − E + C)/T,
+        // E ∈ [0, A·T], |C| ≤ C_max.
         let a_t = design.params.base.levels * design.params.period;
+        let c_max = design.view.as_ref().map_or(0.0, |c| c.max_abs_mm);
         let t = design.params.period;
-        let k_lo = ((-design.margin - 1.5 * a_t) / t).floor() as i64 - 1;
-        let k_hi = ((design.params.width + design.margin + 0.5 * a_t) / t).ceil() as i64 + 1;
+        let k_lo = ((-design.margin - 1.5 * a_t - c_max) / t).floor() as i64 - 1;
+        let k_hi =
+            ((design.params.width + design.margin + 0.5 * a_t + c_max) / t).ceil() as i64 + 1;
         // a printed base has two band edges per period: φ = k and φ = k + duty
         design.base_creases = match design.params.base.kind {
             BaseKind::DualLens => (k_lo, k_hi),
@@ -952,7 +963,7 @@ impl Design {
 
     fn validate_profile(&self) -> Result<(), DesignError> {
         let a_t = self.params.base.levels * self.params.period;
-        if a_t == 0.0 {
+        if a_t == 0.0 && self.view.is_none() {
             return Ok(());
         }
         let (hw, hh) = (
@@ -975,7 +986,52 @@ impl Design {
                 format!("use levels ≤ {max_levels:.3}, or more profile blur"),
             ));
         }
+        if let Some(view) = &self.view {
+            if shift_slope + view.max_slope_grid >= limits::MAX_SHIFT_SLOPE {
+                self.validate_compensated_slope(view.spacing())?;
+            }
+        }
         self.validate_leaning_lenses(a_t)
+    }
+
+    /// The compensated phase must rise with u as the elevation's alone
+    /// must: |∂(E − C)/∂u| below [`limits::MAX_SHIFT_SLOPE`], scanned over
+    /// the extended layout at a quarter of the finer of the profile's detail
+    /// and C's grid. Only run where the two slopes' sum could reach it.
+    fn validate_compensated_slope(&self, c_spacing: f64) -> Result<(), DesignError> {
+        let detail = self.params.profile.detail_mm().unwrap_or(f64::INFINITY);
+        let (hw, hh) = (
+            self.params.width / 2.0 + self.margin,
+            self.half_height + self.margin,
+        );
+        let longer = 2.0 * hw.max(hh);
+        let step = (0.25 * detail.min(c_spacing)).max(longer / COMPENSATED_SLOPE_CELLS);
+        let (nx, ny) = (
+            (2.0 * hw / step).ceil() as usize,
+            (2.0 * hh / step).ceil() as usize,
+        );
+        let steepest = (0..=ny)
+            .flat_map(|j| (0..=nx).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                let q = DVec2::new(-hw + i as f64 * step, -hh + j as f64 * step);
+                (self.shift_and_gradient(q.x, q.y).1.x.abs(), q)
+            })
+            .fold((0.0f64, DVec2::ZERO), |a, b| if b.0 > a.0 { b } else { a });
+        if steepest.0 >= limits::MAX_SHIFT_SLOPE {
+            return Err(err(
+                Param::ViewCompensate,
+                true,
+                format!(
+                    "the view compensation C makes the base phase stop rising with u: ∂(E − C)/∂u = {:.3} at layout ({:.1}, {:.1}) mm; it must stay below {} or the base lenses fold",
+                    steepest.0,
+                    steepest.1.x,
+                    steepest.1.y,
+                    limits::MAX_SHIFT_SLOPE
+                ),
+                "use a larger radius, fewer levels, a smaller field (lens.afov), or compensate = false",
+            ));
+        }
+        Ok(())
     }
 
     /// Base lenses leaning over themselves. A crease slanted in xy (the
@@ -1000,11 +1056,16 @@ impl Design {
             .map(|q| {
                 let (s_u, s_v) = self.base_tangents(q.x, q.y);
                 let (_, grad) = self.params.profile.value_grad(q.x, q.y);
+                let view_grad = self
+                    .view
+                    .as_ref()
+                    .map_or(DVec2::ZERO, |c| c.offset(q.x, q.y).1);
                 LeanFrame {
                     at: q,
                     s_u,
                     s_v,
                     grad,
+                    view_grad,
                 }
             })
             .collect();
@@ -1019,6 +1080,21 @@ impl Design {
         };
         let (flank, at) = steepest(1.0);
         let limit = limits::MAX_FLANK_DEG.to_radians();
+        let by_view = self.view.as_ref().map(|_| steepest(0.0));
+        if let Some((by_view, by_view_at)) = by_view.filter(|(f, _)| f.is_nan() || *f > limit) {
+            return Err(err(
+                Param::ViewCompensate,
+                true,
+                format!(
+                    "the view compensation slants the base creases across the layout so far that at layout ({:.1}, {:.1}) mm the base lenses' flanks reach {:.1}°, over the {}° limit (the device must stay a graph over xy)",
+                    by_view_at.x,
+                    by_view_at.y,
+                    by_view.to_degrees(),
+                    limits::MAX_FLANK_DEG
+                ),
+                "use a larger radius, a smaller field (lens.afov), or compensate = false",
+            ));
+        }
         if flank.is_nan() || flank > limit {
             // the largest share of the levels that keeps every flank in
             // the limit (the flanks steepen with the slant, and it with A),
@@ -1059,6 +1135,8 @@ struct LeanFrame {
     s_u: DVec3,
     s_v: DVec3,
     grad: DVec2,
+    /// ∇C, the view compensation's gradient (zero without it).
+    view_grad: DVec2,
 }
 
 impl LeanFrame {
@@ -1066,8 +1144,12 @@ impl LeanFrame {
     /// horizontal (over 90°: it overhangs), for shift amplitude `a_t` (mm)
     /// and base half-AFOV `half_afov`.
     fn flank(&self, a_t: f64, half_afov: f64) -> f64 {
-        let slant =
-            a_t * self.grad.y / (1.0 - a_t * self.grad.x).max(1.0 - limits::MAX_SHIFT_SLOPE);
+        // the shift's gradient, A·T·∇e − ∇C
+        let (along, across) = (
+            a_t * self.grad.y - self.view_grad.y,
+            a_t * self.grad.x - self.view_grad.x,
+        );
+        let slant = along / (1.0 - across).max(1.0 - limits::MAX_SHIFT_SLOPE);
         let n = self.s_u.cross(self.s_v).normalize();
         let across = self.s_u.normalize();
         let along = self.s_v + slant * self.s_u;
@@ -1093,6 +1175,10 @@ const LEAN_BISECTIONS: usize = 30;
 
 /// Cells per side of the grid [`Design::validate_leaning_lenses`] samples.
 const LEAN_GRID_CELLS: usize = 128;
+
+/// Most cells along the longer side of the scan of
+/// [`Design::validate_compensated_slope`].
+const COMPENSATED_SLOPE_CELLS: f64 = 2048.0;
 
 #[cfg(test)]
 mod tests {
@@ -1154,6 +1240,7 @@ mod tests {
             s_u: DVec3::X,
             s_v: DVec3::Y,
             grad,
+            view_grad: DVec2::ZERO,
         };
         for s in [0.0f64, 0.5, 2.0, -3.0] {
             let expected = (half.tan() * (1.0 + s * s).sqrt()).atan();
@@ -1171,6 +1258,7 @@ mod tests {
             s_u: DVec3::new(slope.cos(), 0.0, slope.sin()),
             s_v: DVec3::Y,
             grad: DVec2::ZERO,
+            view_grad: DVec2::ZERO,
         };
         assert!((tilted.flank(0.5, half) - 70f64.to_radians()).abs() < 1e-12);
         // a slant turns a flank about the crease's normal plane, so over a
@@ -1190,6 +1278,7 @@ mod tests {
             s_u: DVec3::new(1.0, 0.0, -0.688195),
             s_v: DVec3::new(0.0, 1.0, 0.403014),
             grad,
+            view_grad: DVec2::ZERO,
         };
         let half = 41.314931f64.to_radians();
         assert!(two_way(DVec2::ZERO).flank(0.5, half) < 80f64.to_radians());

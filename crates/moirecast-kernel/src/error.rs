@@ -25,11 +25,15 @@ pub enum Param {
     ProfileImage,
     ProfileWavelength,
     ProfileSigma,
+    ViewTilt,
+    ViewTiltAlong,
+    ViewDistance,
+    ViewCompensate,
 }
 
 impl Param {
     /// Every parameter, for exhaustive mappings and their tests.
-    pub const ALL: [Param; 19] = [
+    pub const ALL: [Param; 23] = [
         Param::SurfaceRadius,
         Param::SurfaceFormula,
         Param::Width,
@@ -49,6 +53,10 @@ impl Param {
         Param::ProfileImage,
         Param::ProfileWavelength,
         Param::ProfileSigma,
+        Param::ViewTilt,
+        Param::ViewTiltAlong,
+        Param::ViewDistance,
+        Param::ViewCompensate,
     ];
 }
 

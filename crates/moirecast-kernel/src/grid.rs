@@ -49,7 +49,10 @@ impl CubicGrid {
     /// The grid of `values` (row-major, `nx × ny`, at least 2 × 2) at
     /// nodes `origin + (i, j)·spacing`.
     pub fn new(origin: DVec2, spacing: f64, nx: usize, ny: usize, values: Vec<f64>) -> Self {
-        assert!(nx >= 2 && ny >= 2 && values.len() == nx * ny, "a grid of at least 2 × 2 nodes");
+        assert!(
+            nx >= 2 && ny >= 2 && values.len() == nx * ny,
+            "a grid of at least 2 × 2 nodes"
+        );
         CubicGrid {
             origin,
             spacing,
@@ -158,5 +161,4 @@ impl CubicGrid {
             self.at(s.i as isize - 1 + a as isize, s.j as isize - 1 + b as isize)
         })
     }
-
 }

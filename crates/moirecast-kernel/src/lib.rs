@@ -45,6 +45,7 @@ pub mod solve;
 pub mod strategies;
 pub mod surface;
 pub mod tolerance;
+pub mod view;
 
 pub use design::{
     BaseKind, BaseParams, Design, DesignParams, LensParams, LensRule, MeshBudget, PrintedBase,
@@ -57,3 +58,4 @@ pub use model::BaseSection;
 pub use profile::{Profile, ProfileMode, Raster};
 pub use surface::PitchSurface;
 pub use tolerance::Tolerance;
+pub use view::{DesignView, ViewCompensation};

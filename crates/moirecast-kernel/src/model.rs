@@ -68,12 +68,7 @@ impl Design {
     pub fn base_tangents(&self, u: f64, v: f64) -> (DVec3, DVec3) {
         let surface = self.surface();
         let jet = surface.jet(u, v);
-        let big_n = jet.du.cross(jet.dv);
-        let len = big_n.length();
-        let n = big_n / len;
-        let normal_derivative = |big_n_d: DVec3| (big_n_d - n * n.dot(big_n_d)) / len;
-        let n_u = normal_derivative(jet.duu.cross(jet.dv) + jet.du.cross(jet.duv));
-        let n_v = normal_derivative(jet.duv.cross(jet.dv) + jet.du.cross(jet.dvv));
+        let (n, n_u, n_v) = jet.normal_derivatives();
         // λ = |c| / T with c = f(u + T/2) − f(u − T/2)
         let t = self.params.period;
         let (jp, jm) = (surface.jet(u + t / 2.0, v), surface.jet(u - t / 2.0, v));
@@ -93,12 +88,39 @@ impl Design {
         (s_u, s_v)
     }
 
-    /// Base shift E(u, v) = A·T·e(u, v) (mm).
+    /// The base's shift E(u, v) − C(u, v) (mm): the elevation's
+    /// E = A·T·e(u, v) less the view compensation C (zero where the base is
+    /// not compensated), so that φ = (u + W/2 − shift)/T.
     pub fn shift(&self, u: f64, v: f64) -> f64 {
-        self.params.base.levels * self.params.period * self.params.profile.value(u, v)
+        let elevation =
+            self.params.base.levels * self.params.period * self.params.profile.value(u, v);
+        match &self.view {
+            None => elevation,
+            Some(view) => elevation - view.value(u, v),
+        }
     }
 
-    /// Base phase φ(u, v) = (u + W/2 − E(u, v)) / T (METHOD §4).
+    /// The shift and its gradient in (u, v) (mm, and per mm).
+    pub fn shift_and_gradient(&self, u: f64, v: f64) -> (f64, glam::DVec2) {
+        let a_t = self.params.base.levels * self.params.period;
+        let (e, grad) = self.params.profile.value_grad(u, v);
+        match &self.view {
+            None => (a_t * e, a_t * grad),
+            Some(view) => {
+                let (c, c_grad) = view.offset(u, v);
+                (a_t * e - c, a_t * grad - c_grad)
+            }
+        }
+    }
+
+    /// The view compensation C(u, v) (mm; 0 where the base is not
+    /// compensated).
+    pub fn view_offset(&self, u: f64, v: f64) -> f64 {
+        self.view.as_ref().map_or(0.0, |view| view.value(u, v))
+    }
+
+    /// Base phase φ(u, v) = (u + W/2 − E(u, v) + C(u, v)) / T (METHOD §4,
+    /// with the view compensation).
     pub fn base_phase(&self, u: f64, v: f64) -> f64 {
         (u + self.params.width / 2.0 - self.shift(u, v)) / self.params.period
     }
@@ -139,22 +161,41 @@ impl Design {
             self.params.base.levels * self.params.period,
         );
         let u0 = self.crease_phase(k) * t - self.params.width / 2.0;
-        if a_t == 0.0 {
+        // the shift lies in [−C_max, A·T + C_max]
+        let c_max = self.view.as_ref().map_or(0.0, |view| view.max_abs_mm);
+        if a_t == 0.0 && c_max == 0.0 {
             return Ok(u0);
         }
         let profile = &self.params.profile;
-        let g = |u: f64| {
-            let (e, grad) = profile.value_grad(u, v);
-            (u - u0 - a_t * e, 1.0 - a_t * grad.x)
+        let (x0, lo, hi) = match &self.view {
+            None => (
+                start.unwrap_or_else(|| u0 + a_t * profile.value(u0, v)),
+                u0 - 0.5 * a_t,
+                u0 + 1.5 * a_t,
+            ),
+            Some(_) => (
+                start.unwrap_or_else(|| u0 + self.shift(u0, v)),
+                u0 - 0.5 * a_t - 2.0 * c_max,
+                u0 + 1.5 * a_t + 2.0 * c_max,
+            ),
         };
-        let x0 = start.unwrap_or_else(|| u0 + a_t * profile.value(u0, v));
+        let g = |u: f64| match &self.view {
+            None => {
+                let (e, grad) = profile.value_grad(u, v);
+                (u - u0 - a_t * e, 1.0 - a_t * grad.x)
+            }
+            Some(_) => {
+                let (shift, grad) = self.shift_and_gradient(u, v);
+                (u - u0 - shift, 1.0 - grad.x)
+            }
+        };
         let what = || format!("base crease {k} at v = {v}");
-        let (lo, hi) = (u0 - 0.5 * a_t, u0 + 1.5 * a_t);
         bracketed_newton(lo, hi, x0, 1e-13, &what, g).or_else(|_| {
             // g increases with u: step each end outward, doubling, until
             // g changes sign between them
+            let step0 = a_t.max(c_max);
             let widened = |mut end: f64, outward: f64, wrong_side: &dyn Fn(f64) -> bool| {
-                let mut step = a_t;
+                let mut step = step0;
                 for _ in 0..64 {
                     if !wrong_side(g(end).0) {
                         return Ok(end);
@@ -367,6 +408,7 @@ mod tests {
                 },
                 profile: Profile::Flat,
                 tolerance: 0.002,
+                view: crate::DesignView::default(),
             };
             let d = Design::new(p).unwrap();
             for (u, v) in [(0.0, 0.0), (7.0, -3.0), (-9.5, 4.5)] {

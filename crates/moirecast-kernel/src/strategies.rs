@@ -86,6 +86,7 @@ prop_compose! {
         d_scale in prop_oneof![Just(None), (0.3..1.5f64).prop_map(Some)],
         tol_scale in 0.02..0.2f64,
         equal_radius in proptest::bool::weighted(0.15),
+        view in view_strategy(),
     ) -> Option<Design> {
         let std = StandardLens::new(period, afov.to_radians(), index);
         let p = DesignParams {
@@ -97,8 +98,29 @@ prop_compose! {
             base: BaseParams { kind: BaseKind::DualLens, a, d: d_scale.map(|s| s * std.focal_depth), levels, afov: None },
             profile,
             tolerance: (tol_scale * std.sag).max(Tolerance::MIN_MM),
+            view,
         };
         Design::new(p).ok()
+    }
+}
+
+prop_compose! {
+    /// A design view: mostly straight down and compensated (the default),
+    /// else tilted up to 20° either way, from afar or from 100–1000 mm,
+    /// and now and then uncompensated.
+    pub fn view_strategy()(
+        tilted in proptest::bool::weighted(0.3),
+        tilt in -20.0..20.0f64,
+        tilt_along in -20.0..20.0f64,
+        distance in prop_oneof![3 => Just(None), 1 => (100.0..1000.0f64).prop_map(Some)],
+        compensate in proptest::bool::weighted(0.9),
+    ) -> crate::view::DesignView {
+        crate::view::DesignView {
+            tilt: if tilted { tilt.to_radians() } else { 0.0 },
+            tilt_along: if tilted { tilt_along.to_radians() } else { 0.0 },
+            distance,
+            compensate,
+        }
     }
 }
 

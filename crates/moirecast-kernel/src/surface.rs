@@ -29,6 +29,18 @@ impl Jet {
         self.du.cross(self.dv).normalize()
     }
 
+    /// The unit normal n and its derivatives n_u and n_v, from the second
+    /// derivatives: with N = f_u × f_v, n_u = (N_u − n (n·N_u)) / |N|.
+    pub fn normal_derivatives(&self) -> (DVec3, DVec3, DVec3) {
+        let big_n = self.du.cross(self.dv);
+        let len = big_n.length();
+        let n = big_n / len;
+        let normal_derivative = |big_n_d: DVec3| (big_n_d - n * n.dot(big_n_d)) / len;
+        let n_u = normal_derivative(self.duu.cross(self.dv) + self.du.cross(self.duv));
+        let n_v = normal_derivative(self.duv.cross(self.dv) + self.du.cross(self.dvv));
+        (n, n_u, n_v)
+    }
+
     /// Largest absolute principal curvature (1/mm).
     pub fn max_abs_curvature(&self) -> f64 {
         let n = self.normal();

@@ -234,7 +234,9 @@ fn a_sparse_wall_edge_over_a_rippled_one_does_not_fold() {
 /// crosses the right wall 7.5e-5 mm inside the back boundary row, and the
 /// row placed there reaches the left wall too. The left wall's revealer edge
 /// has three vertices; the zip fanned the middle one (2.56 mm away) over the
-/// two close base vertices: a wall triangle 9.9e-6 mm thin.
+/// two close base vertices: a wall triangle 9.9e-6 mm thin. The base is
+/// uncompensated, as it was found: the view compensation moves its creases
+/// off the crossing.
 #[test]
 fn a_crossing_row_beside_a_boundary_row_makes_no_wall_sliver() {
     let mut p = DesignParams::with_defaults(
@@ -253,6 +255,7 @@ fn a_crossing_row_beside_a_boundary_row_makes_no_wall_sliver() {
         length: 6.225622547186199,
     };
     p.tolerance = 0.012758894034756644;
+    p.view.compensate = false;
     let d = Design::new(p).unwrap();
     let dm = mesh_device(&d, &Silent).unwrap();
     assert_eq!(dm.stats.crossing_rows, 1, "the case keeps its crossing row");

@@ -324,19 +324,28 @@ struct Shot {
     pixel: f64,
     /// How far behind the image plane orthographic rays start.
     back: f64,
+    /// Where a perspective camera's rays start.
+    eye: DVec3,
     width: usize,
     height: usize,
 }
 
 impl Shot {
-    fn new(scene: &Scene, view: &View) -> Shot {
+    /// The shot of `scene` in `view`; a perspective eye looks at `pivot`
+    /// (the device's centre, [`Design::view_pivot`]) from its distance.
+    fn new(scene: &Scene, view: &View, pivot: DVec3) -> Shot {
         let (lo, hi) = scene.bounds();
         let rot =
             DMat3::from_rotation_y(view.tilt_across) * DMat3::from_rotation_x(view.tilt_along);
         let extent = (hi - lo).x.max((hi - lo).y);
+        let dir = rot * DVec3::NEG_Z;
         Shot {
             camera: view.camera,
-            dir: rot * DVec3::NEG_Z,
+            eye: match view.camera {
+                Camera::Orthographic => pivot,
+                Camera::Perspective { distance } => pivot - distance * dir,
+            },
+            dir,
             across: rot * DVec3::X,
             up: rot * DVec3::Y,
             centre: 0.5 * (lo + hi),
@@ -360,10 +369,7 @@ impl Shot {
     fn ray_through(&self, point: DVec3) -> (DVec3, DVec3) {
         match self.camera {
             Camera::Orthographic => (point - self.back * self.dir, self.dir),
-            Camera::Perspective { distance } => {
-                let eye = self.centre - distance * self.dir;
-                (eye, (point - eye).normalize())
-            }
+            Camera::Perspective { .. } => (self.eye, (point - self.eye).normalize()),
         }
     }
 }
@@ -894,7 +900,7 @@ pub fn render_traced(
     sections: Option<&Sections>,
     view: View,
 ) -> Frame {
-    let shot = Shot::new(scene, &view);
+    let shot = Shot::new(scene, &view, design.view_pivot());
     let (levels, lighting) = (design.params.base.levels, view.lighting);
     let (width, height) = (view.width, view.height);
     let index = design.params.lens.index;

@@ -104,6 +104,10 @@ pub fn key_of(p: Param) -> &'static str {
         Param::ProfileImage => "profile.image",
         Param::ProfileWavelength => "profile.wavelength",
         Param::ProfileSigma => "profile.sigma",
+        Param::ViewTilt => "view.tilt",
+        Param::ViewTiltAlong => "view.tilt_along",
+        Param::ViewDistance => "view.distance",
+        Param::ViewCompensate => "view.compensate",
     }
 }
 
@@ -158,6 +162,8 @@ struct SpecFile {
     profile: ProfileTable,
     #[serde(default)]
     mesh: MeshTable,
+    #[serde(default)]
+    view: ViewTable,
     #[serde(default)]
     mold: MoldTable,
 }
@@ -407,6 +413,76 @@ impl Default for MeshTable {
     }
 }
 
+/// `[view]`: the design view the base is compensated for (docs/method.md).
+#[derive(Deserialize, Serialize, Debug)]
+#[serde(deny_unknown_fields, default)]
+struct ViewTable {
+    tilt: f64,
+    tilt_along: f64,
+    distance: Distance,
+    compensate: bool,
+}
+impl Default for ViewTable {
+    fn default() -> Self {
+        ViewTable {
+            tilt: 0.0,
+            tilt_along: 0.0,
+            distance: Distance::Named("infinite".into()),
+            compensate: true,
+        }
+    }
+}
+
+/// Largest design-view tilt (degrees) either way: past it a lens is seen
+/// nearly edge on.
+pub const VIEW_TILT_DEG: f64 = 60.0;
+/// Nearest design-view eye (mm): nearer than a hand's width a device is
+/// not looked at.
+pub const VIEW_DISTANCE_MM: (f64, f64) = (50.0, 1e6);
+
+/// `[view]` as the kernel's design view.
+fn design_view(file: &str, v: &ViewTable) -> Result<moirecast_kernel::DesignView, SpecError> {
+    let tilt = |key: &'static str, deg: f64| {
+        let deg = finite(file, key, deg)?;
+        if deg.abs() > VIEW_TILT_DEG {
+            return Err(invalid(
+                file,
+                key,
+                deg,
+                format!("must be between -{VIEW_TILT_DEG} and {VIEW_TILT_DEG} degrees"),
+                "use a view closer to straight down",
+            ));
+        }
+        Ok(deg.to_radians())
+    };
+    let distance = match &v.distance {
+        Distance::Mm(d) => {
+            let d = finite(file, "view.distance", *d)?;
+            let (lo, hi) = VIEW_DISTANCE_MM;
+            if !(lo..=hi).contains(&d) {
+                return Err(invalid(file, "view.distance", d, format!("must be between {lo} and {hi} mm, or \"infinite\""), "write the eye's distance from the device in mm, or \"infinite\" for a view from afar"));
+            }
+            Some(d)
+        }
+        Distance::Named(n) if n == "infinite" => None,
+        Distance::Named(n) => {
+            return Err(invalid(
+                file,
+                "view.distance",
+                format!("{n:?}"),
+                "must be a distance in mm or \"infinite\"",
+                "write distance = \"infinite\" or a number",
+            ))
+        }
+    };
+    Ok(moirecast_kernel::DesignView {
+        tilt: tilt("view.tilt", v.tilt)?,
+        tilt_along: tilt("view.tilt_along", v.tilt_along)?,
+        distance,
+        compensate: v.compensate,
+    })
+}
+
 /// `[mold]`: every dimension of the two-piece mold (METHOD §6), in mm and
 /// degrees. Defaults are `MoldParams::default()`.
 #[derive(Deserialize, Serialize, Debug)]
@@ -620,12 +696,18 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         },
         profile: Profile::Flat,
         tolerance: finite(file, "mesh.tolerance", raw.mesh.tolerance)?,
+        view: design_view(file, &raw.view)?,
     };
     // An image's grid must reach as far past the layout as the base reads
-    // it: the design's margin, which the profile does not change. A design
-    // refused here is refused again below, with its profile.
+    // it: the design's margin, which neither the profile nor the view
+    // compensation changes (so this probe leaves the compensation out). A
+    // design refused here is refused again below, with its profile.
     let reach = match raw.profile.image {
-        Some(_) => Design::new(params.clone()).map_or(0.0, |d| d.margin),
+        Some(_) => {
+            let mut probe = params.clone();
+            probe.view.compensate = false;
+            Design::new(probe).map_or(0.0, |d| d.margin)
+        }
         None => 0.0,
     };
     let (profile, profile_source) = profile(file, &raw.profile, (w, h, reach), &images)?;
