@@ -220,7 +220,9 @@ impl ViewReport {
             max_offset_periods: c.as_ref().map_or(0.0, |c| c.max_abs_layout_mm / t),
             max_offset_slope: c.as_ref().map_or(0.0, |c| c.max_slope),
             offset_grid_mm: c.as_ref().map(|c| c.spacing()),
-            offset_fit_um: c.as_ref().map(|c| 1e3 * c.fit_error_mm),
+            offset_fit_um: c
+                .as_ref()
+                .map(|c| 1e3 * (c.fit_error_mm + c.resample_error_mm)),
             max_view_angle_deg: angle,
             max_view_angle_at_mm: at,
             keeps_contrast_deg: moirecast_kernel::view::KEEPS_CONTRAST_DEG,

@@ -239,6 +239,9 @@ pub struct Design {
     pub mesh_budget: MeshBudget,
     /// The base's view compensation C (`None`: C ≡ 0).
     pub view: Option<ViewCompensation>,
+    /// E − C on an image profile's grid, where the base is compensated:
+    /// the shift read in one interpolation instead of two.
+    pub(crate) shift_grid: Option<crate::grid::CubicGrid>,
 }
 
 fn err(
@@ -315,6 +318,7 @@ impl Design {
             max_slope: 0.0,
             mesh_budget: MeshBudget::DEFAULT,
             view: None,
+            shift_grid: None,
             standard,
             params: p,
         };
@@ -324,6 +328,7 @@ impl Design {
         );
         design.settle_margin(base_afov)?;
         design.view = design.compute_view_compensation()?;
+        design.shift_grid = design.sampled_shift_grid();
         design.validate_profile()?;
         // Base creases that can reach the extended layout: φ = (u + W/2 − E + C)/T,
         // E ∈ [0, A·T], |C| ≤ C_max.

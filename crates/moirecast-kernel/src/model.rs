@@ -92,6 +92,9 @@ impl Design {
     /// E = A·T·e(u, v) less the view compensation C (zero where the base is
     /// not compensated), so that φ = (u + W/2 − shift)/T.
     pub fn shift(&self, u: f64, v: f64) -> f64 {
+        if let Some(grid) = &self.shift_grid {
+            return grid.value(u, v);
+        }
         let elevation =
             self.params.base.levels * self.params.period * self.params.profile.value(u, v);
         match &self.view {
@@ -102,6 +105,9 @@ impl Design {
 
     /// The shift and its gradient in (u, v) (mm, and per mm).
     pub fn shift_and_gradient(&self, u: f64, v: f64) -> (f64, glam::DVec2) {
+        if let Some(grid) = &self.shift_grid {
+            return grid.eval(u, v);
+        }
         let a_t = self.params.base.levels * self.params.period;
         let (e, grad) = self.params.profile.value_grad(u, v);
         match &self.view {

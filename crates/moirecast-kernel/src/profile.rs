@@ -325,6 +325,11 @@ impl SampledProfile {
         self.grid.spacing
     }
 
+    /// The grid of e.
+    pub fn grid(&self) -> &CubicGrid {
+        &self.grid
+    }
+
     /// (e, ∇e) at (x, y) by Catmull-Rom interpolation (C¹).
     pub fn eval(&self, x: f64, y: f64) -> (f64, DVec2) {
         self.grid.eval(x, y)

@@ -116,6 +116,10 @@ const LENS_RESIDUAL_MM: f64 = 1e-9;
 /// the `view-angle` warning names the place.
 pub const KEEPS_CONTRAST_DEG: f64 = 35.0;
 
+/// Points per side of the lattice on which an image shift's parting from
+/// C's own interpolant is measured.
+const RESAMPLE_LATTICE: usize = 97;
+
 /// Points per side of the lattice on which the largest view angle is found.
 const ANGLE_LATTICE: usize = 65;
 
@@ -150,6 +154,9 @@ pub struct ViewCompensation {
     /// Largest distance of the interpolant from the traced C at the
     /// grid's cell centres over Ω (mm).
     pub fit_error_mm: f64,
+    /// Where an image's shift carries C on the image's grid, how far that
+    /// parts from C's own interpolant (mm; 0 otherwise).
+    pub resample_error_mm: f64,
     /// The view's largest angle to a lens axis across the lenses over Ω
     /// (rad), and where (layout mm).
     pub max_angle: (f64, DVec2),
@@ -411,6 +418,54 @@ impl Design {
         }
     }
 
+    /// E − C on the nodes of an image profile's grid, for a compensated
+    /// base, so that the shift is one interpolation, not two. C, far
+    /// smoother than the image, is read off its own grid at each node;
+    /// between the nodes the two interpolants part by a little (C's own
+    /// second derivative jumps at its cells' edges), which is measured at
+    /// the image cells' centres over a lattice on the layout and added to
+    /// C's stated error. Kept only while that sum stays in the budget.
+    pub(crate) fn sampled_shift_grid(&mut self) -> Option<CubicGrid> {
+        use rayon::prelude::*;
+        let (crate::Profile::Sampled(profile), Some(view)) = (&self.params.profile, &self.view)
+        else {
+            return None;
+        };
+        let e = profile.grid();
+        let a_t = self.params.base.levels * self.params.period;
+        let node =
+            |k: usize| e.origin + e.spacing * DVec2::new((k % e.nx) as f64, (k / e.nx) as f64);
+        let values = e
+            .values()
+            .par_iter()
+            .enumerate()
+            .map(|(k, value)| {
+                let q = node(k);
+                a_t * value - view.value(q.x, q.y)
+            })
+            .collect();
+        let grid = CubicGrid::new(e.origin, e.spacing, e.nx, e.ny, values);
+        // the parting, at image cells' centres on a lattice over the layout
+        let (hw, hh, n) = (self.params.width / 2.0, self.half_height, RESAMPLE_LATTICE);
+        let parting = (0..n * n)
+            .into_par_iter()
+            .map(|k| {
+                let f = |i: usize, half: f64| half * (2.0 * i as f64 / (n - 1) as f64 - 1.0);
+                let at = DVec2::new(f(k % n, hw), f(k / n, hh));
+                let cell = ((at - e.origin) / e.spacing).floor() + DVec2::splat(0.5);
+                let q = e.origin + e.spacing * cell;
+                let apart = a_t * profile.value(q.x, q.y) - view.value(q.x, q.y);
+                (grid.value(q.x, q.y) - apart).abs()
+            })
+            .reduce(|| 0.0, f64::max);
+        let budget = FIT_SHARE * self.tolerance.mm();
+        let view = self.view.as_mut().expect("compensated");
+        (view.fit_error_mm + parting <= budget).then(|| {
+            view.resample_error_mm = parting;
+            grid
+        })
+    }
+
     /// Whether C ≡ 0 by symmetry: a plane seen straight down.
     pub fn view_offset_vanishes(&self) -> bool {
         matches!(self.surface(), crate::PitchSurface::Plane) && self.params.view.is_straight_down()
@@ -542,6 +597,7 @@ impl Design {
             max_abs_layout_mm,
             max_slope,
             fit_error_mm: fit_error,
+            resample_error_mm: 0.0,
             max_angle: self.max_view_angle(),
         }
     }
@@ -698,6 +754,62 @@ mod tests {
             worst <= budget,
             "C is {worst:e} mm from the closed form (budget {budget:e})"
         );
+    }
+
+    /// An image's shift is E − C on the image's grid: at its nodes it is E
+    /// and C read off their own grids, and between them within the
+    /// parting the design states, which with C's own fit stays in budget.
+    #[test]
+    fn an_image_shift_carries_c_on_its_own_grid() {
+        let (w, h) = (64, 48);
+        let luminance = (0..w * h)
+            .map(|k| {
+                let (x, y) = ((k % w) as f32 / w as f32, (k / w) as f32 / h as f32);
+                0.5 + 0.4 * (6.0 * x).sin() * (4.0 * y).cos()
+            })
+            .collect();
+        let raster = crate::Raster {
+            width: w,
+            height: h,
+            luminance,
+        };
+        let profile = crate::profile::SampledProfile::from_raster(
+            &raster,
+            crate::ProfileMode::Gray,
+            false,
+            0.8,
+            12.0,
+            9.0,
+        )
+        .unwrap();
+        let mut p =
+            DesignParams::with_defaults(PitchSurface::Saddle { radius: 40.0 }, 12.0, 9.0, 0.5);
+        p.profile = crate::Profile::Sampled(profile);
+        let design = Design::new(p).unwrap();
+        let view = design.view.as_ref().expect("compensated");
+        assert!(design.shift_grid.is_some());
+        let a_t = design.params.base.levels * design.params.period;
+        let mut worst = 0.0f64;
+        for k in 0..400 {
+            let (u, v) = (
+                -6.0 + 12.0 * (k % 20) as f64 / 19.3,
+                -4.5 + 9.0 * (k / 20) as f64 / 19.7,
+            );
+            let apart = a_t * design.params.profile.value(u, v) - view.value(u, v);
+            let (shift, _) = design.shift_and_gradient(u, v);
+            assert_eq!(
+                shift,
+                design.shift(u, v),
+                "one shift for the solver and the checks"
+            );
+            worst = worst.max((shift - apart).abs());
+        }
+        let stated = view.resample_error_mm;
+        assert!(
+            worst <= 1.5 * stated.max(1e-12),
+            "{worst:e} mm against {stated:e} stated"
+        );
+        assert!(view.fit_error_mm + stated <= FIT_SHARE * design.tolerance.mm());
     }
 
     #[test]
