@@ -218,6 +218,27 @@ fn outputs_are_byte_identical_across_runs() {
     }
 }
 
+/// A formula of 200 terms aborted the command line (its parser overflowed
+/// the stack): it is refused at `surface.z` by the formula budget's rule,
+/// and nothing is written.
+#[test]
+fn a_huge_formula_is_refused_by_name() {
+    let z: Vec<String> = (0..200).map(|i| format!("x*y/{}", 1000 + i)).collect();
+    let spec = format!(
+        "[surface]\nkind = \"formula\"\nz = \"{}\"\n[profile]\nkind = \"rings\"\n",
+        z.join("+")
+    );
+    let dir = scratch("huge-formula");
+    let (ok, err, out) = run(&spec, &dir);
+    assert!(
+        !ok && err.contains("`surface.z`")
+            && err.contains("(formula-length)")
+            && err.contains("Fix:"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
 /// On a plane seen straight down the view compensation is zero by
 /// symmetry: the device and its mold are byte-identical to the
 /// uncompensated base's (`view.compensate = false`), and report.json

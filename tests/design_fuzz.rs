@@ -107,7 +107,8 @@ fn draw(rng: &mut Rng, with_mold: bool) -> String {
                 rng.log(0.05, 5.0),
                 rng.log(2.0, 40.0),
             );
-            let z = match rng.next() % 7 {
+            let z = match rng.next() % 8 {
+                7 => heavy_formula(rng),
                 0 => format!("{}*x", num(k)),
                 1 => format!("{}*y", num(k)),
                 2 => format!("{}*x + {}*y", num(k), num(rng.uniform(-1.0, 1.0))),
@@ -284,6 +285,22 @@ fn draw(rng: &mut Rng, with_mold: bool) -> String {
         }
     }
     t
+}
+
+/// A long, deep or product-heavy formula (issue 44: such formulas
+/// overflowed the parser's stack): sums of many terms, nested functions,
+/// products and powers, mostly past the formula budget, some within it.
+fn heavy_formula(rng: &mut Rng) -> String {
+    let n = 1 + (rng.next() % 60) as usize;
+    let terms = |term: &dyn Fn(usize) -> String, join: &str| {
+        (0..n).map(term).collect::<Vec<_>>().join(join)
+    };
+    match rng.next() % 4 {
+        0 => terms(&|i| format!("x*y/{}", 1000 + i), "+"),
+        1 => (0..n.min(14)).fold("x/20".to_string(), |f, _| format!("sin({f})")),
+        2 => format!("({})/1000", terms(&|i| format!("(x/30+{})", i % 7), "*")),
+        _ => terms(&|_| "x/40".to_string(), "^"),
+    }
 }
 
 /// A `[view]` table: mostly tilts a viewer takes, some past grazing the

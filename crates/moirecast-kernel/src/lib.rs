@@ -31,6 +31,7 @@ pub mod check;
 pub mod design;
 pub mod device_mesh;
 pub mod error;
+pub mod formula;
 pub mod grid;
 pub mod lens;
 pub mod measure;

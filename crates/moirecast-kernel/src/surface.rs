@@ -8,6 +8,7 @@
 //! Derivatives are analytic for the closed forms and symbolic (exmex) for
 //! `formula`.
 
+use crate::formula::{self, FormulaError};
 use exmex::prelude::*;
 use glam::DVec3;
 use std::sync::Arc;
@@ -111,6 +112,11 @@ impl NamedExpr {
         }
     }
 
+    /// The length of the expression written out (0 for an absent one).
+    fn written_len(&self) -> usize {
+        self.expr.as_ref().map_or(0, |e| e.unparse().len())
+    }
+
     fn eval(&self, x: f64, y: f64) -> f64 {
         let Some(expr) = &self.expr else { return 0.0 };
         let mut vars = [0.0; 2];
@@ -122,19 +128,40 @@ impl NamedExpr {
 }
 
 impl FormulaSurface {
-    /// Parses `z = h(x, y)` and differentiates it twice. The error says what
-    /// is wrong with the expression.
-    pub fn parse(source: &str) -> Result<Self, String> {
-        let h = NamedExpr::new(exmex::parse::<f64>(source).map_err(|e| e.to_string())?)?;
-        let hx = h.partial(true)?;
-        let hy = h.partial(false)?;
-        let hxx = hx.partial(true)?;
-        let hxy = hx.partial(false)?;
-        let hyy = hy.partial(false)?;
+    /// Parses `z = h(x, y)` and differentiates it twice, within the
+    /// budget of [`crate::formula`]: a formula past it is refused by a
+    /// named rule before exmex sees it, and exmex runs on a thread whose
+    /// stack the budget cannot exhaust. The error says what is wrong.
+    pub fn parse(source: &str) -> Result<Self, FormulaError> {
+        formula::check_budget(source)?;
+        let owned = source.to_owned();
+        // an exmex expression holds 20 KB inline: the six cross back boxed
+        let terms = formula::on_parse_thread(move || {
+            let terms = Arc::new(Self::differentiate(&owned)?);
+            let written: usize = terms[1..].iter().map(NamedExpr::written_len).sum();
+            formula::check_derivatives(written).map(|()| terms)
+        })??;
         Ok(FormulaSurface {
             source: source.to_owned(),
-            terms: Arc::new([h, hx, hy, hxx, hxy, hyy]),
+            terms,
         })
+    }
+
+    /// h and its first and second partial derivatives, by exmex.
+    fn differentiate(source: &str) -> Result<[NamedExpr; 6], FormulaError> {
+        let syntax = |e: String| FormulaError {
+            rule: "formula-syntax",
+            problem: format!("is not a formula in x and y: {e}"),
+            fix: "use x, y, numbers, + - * / ^ and sin, cos, exp, sqrt…".into(),
+        };
+        let h = NamedExpr::new(exmex::parse::<f64>(source).map_err(|e| syntax(e.to_string()))?)
+            .map_err(syntax)?;
+        let hx = h.partial(true).map_err(syntax)?;
+        let hy = h.partial(false).map_err(syntax)?;
+        let hxx = hx.partial(true).map_err(syntax)?;
+        let hxy = hx.partial(false).map_err(syntax)?;
+        let hyy = hy.partial(false).map_err(syntax)?;
+        Ok([h, hx, hy, hxx, hxy, hyy])
     }
 
     /// z = h(x, y) only.
@@ -373,7 +400,10 @@ mod tests {
 
     #[test]
     fn formula_rejects_unknown_variable() {
-        assert!(FormulaSurface::parse("x + q").unwrap_err().contains("`q`"));
+        assert!(FormulaSurface::parse("x + q")
+            .unwrap_err()
+            .problem
+            .contains("`q`"));
     }
 
     #[test]

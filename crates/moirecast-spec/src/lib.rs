@@ -764,17 +764,11 @@ fn surface(file: &str, s: &SurfaceTable) -> Result<PitchSurface, SpecError> {
                     "add e.g. z = \"(x*x - y*y)/120\"",
                 )
             })?;
-            PitchSurface::Formula(moirecast_kernel::surface::FormulaSurface::parse(z).map_err(
-                |e| {
-                    invalid(
-                        file,
-                        "surface.z",
-                        format!("{z:?}"),
-                        format!("is not a formula in x and y: {e}"),
-                        "use x, y, numbers, + - * / ^ and sin, cos, exp, sqrt…",
-                    )
-                },
-            )?)
+            PitchSurface::Formula(
+                moirecast_kernel::surface::FormulaSurface::parse(z).map_err(|e| {
+                    invalid(file, "surface.z", format!("{z:?}"), e.to_string(), e.fix)
+                })?,
+            )
         }
     })
 }
