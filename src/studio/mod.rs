@@ -45,9 +45,17 @@ use views::{DeviceView, ExploreView, MoldView};
 /// Request bodies larger than this are refused with 413.
 pub const MAX_BODY_BYTES: usize = 1_000_000;
 
-/// The page: one HTML file with its script and style inline, embedded in
-/// the binary (no CDN, no build step).
+/// The page: its markup, script and style, embedded in the binary (no CDN,
+/// no build step). The script and style are files of their own so that the
+/// Content-Security-Policy can forbid inline script.
 const PAGE: &str = include_str!("page.html");
+const SCRIPT: &str = include_str!("page.js");
+const STYLE: &str = include_str!("page.css");
+
+/// Every response's Content-Security-Policy: the page's own script and
+/// style only, images from itself and the frames' blob URLs, requests to
+/// itself, and no framing by any other page.
+const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob:; connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
 
 /// How `moirecast studio` was started.
 pub struct StudioOptions {
@@ -317,6 +325,8 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
     };
     let router = Router::new()
         .route("/", get(page))
+        .route("/studio.js", get(script))
+        .route("/studio.css", get(style))
         .route("/api/keys", get(keys))
         .route("/api/state", get(state))
         .route("/api/spec", get(get_spec).put(put_spec))
@@ -340,28 +350,82 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
 }
 
 /// Refuses requests whose `Host` is not an address this server answers
-/// at: a page on another site that rebinds its name to 127.0.0.1 sends
-/// its own name.
+/// at (a page on another site that rebinds its name to 127.0.0.1 sends its
+/// own name), and state-changing requests from another origin (browsers
+/// send `Origin` on every cross-origin write, and `Sec-Fetch-Site`; local
+/// tools such as curl send neither). Every answer carries the page's
+/// Content-Security-Policy and refuses to be framed.
 async fn loopback_only(
     State(studio): State<Arc<Studio>>,
     request: Request,
     next: Next,
 ) -> Response {
-    let host = request
-        .headers()
-        .get(header::HOST)
-        .and_then(|h| h.to_str().ok())
-        .unwrap_or("");
-    if !studio.hosts.iter().any(|h| h == host) {
-        return error(
+    let headers = request.headers();
+    let text = |name: header::HeaderName| {
+        headers
+            .get(name)
+            .map(|h| h.to_str().unwrap_or("(not text)").to_string())
+    };
+    let host = text(header::HOST).unwrap_or_default();
+    let mut response = if !studio.hosts.contains(&host) {
+        error(
             StatusCode::FORBIDDEN,
             format!(
                 "Host `{host}` is not this studio's address ({})",
                 studio.hosts[0]
             ),
-        );
+        )
+    } else if let Some(why) = cross_site_write(&studio, &request) {
+        error(StatusCode::FORBIDDEN, why)
+    } else {
+        next.run(request).await
+    };
+    let safety = response.headers_mut();
+    safety.insert(
+        header::CONTENT_SECURITY_POLICY,
+        HeaderValue::from_static(CSP),
+    );
+    safety.insert(header::X_FRAME_OPTIONS, HeaderValue::from_static("DENY"));
+    safety.insert(
+        header::X_CONTENT_TYPE_OPTIONS,
+        HeaderValue::from_static("nosniff"),
+    );
+    safety.insert(
+        header::REFERRER_POLICY,
+        HeaderValue::from_static("no-referrer"),
+    );
+    response
+}
+
+/// Why a request that changes state comes from another site, if it does:
+/// an `Origin` other than the studio's own, or a `Sec-Fetch-Site` other
+/// than `same-origin` or `none` (typed into the address bar).
+fn cross_site_write(studio: &Studio, request: &Request) -> Option<String> {
+    use axum::http::Method;
+    if matches!(
+        *request.method(),
+        Method::GET | Method::HEAD | Method::OPTIONS
+    ) {
+        return None;
     }
-    next.run(request).await
+    let headers = request.headers();
+    if let Some(origin) = headers.get(header::ORIGIN) {
+        let origin = origin.to_str().unwrap_or("(not text)");
+        let ours = studio.hosts.iter().any(|h| origin == format!("http://{h}"));
+        if !ours {
+            return Some(format!(
+                "a {} from origin `{origin}` is refused: only the studio's own page may change the design or write files",
+                request.method()
+            ));
+        }
+    }
+    match headers.get("sec-fetch-site").map(|v| v.to_str().unwrap_or("")) {
+        None | Some("same-origin") | Some("none") => None,
+        Some(site) => Some(format!(
+            "a {} from a {site} page is refused: only the studio's own page may change the design or write files",
+            request.method()
+        )),
+    }
 }
 
 /// A JSON error body `{"error": message}`.
@@ -380,6 +444,14 @@ fn bytes(content_type: &'static str, body: Vec<u8>) -> Response {
 
 async fn page() -> Html<&'static str> {
     Html(PAGE)
+}
+
+async fn script() -> Response {
+    bytes("text/javascript; charset=utf-8", SCRIPT.as_bytes().to_vec())
+}
+
+async fn style() -> Response {
+    bytes("text/css; charset=utf-8", STYLE.as_bytes().to_vec())
 }
 
 async fn keys() -> Json<Vec<moirecast_spec::KeyDoc>> {

@@ -53,10 +53,26 @@ pub fn start_studio(spec: std::path::PathBuf, out: std::path::PathBuf) -> u16 {
 
 /// `method target` with `body` to 127.0.0.1:`port`, with `Host: host`.
 pub fn request(port: u16, host: &str, method: &str, target: &str, body: &[u8]) -> Response {
+    request_with(port, host, method, target, &[], body)
+}
+
+/// [`request`] with more `headers` (name, value).
+pub fn request_with(
+    port: u16,
+    host: &str,
+    method: &str,
+    target: &str,
+    headers: &[(&str, &str)],
+    body: &[u8],
+) -> Response {
     let mut stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    let extra: String = headers
+        .iter()
+        .map(|(n, v)| format!("{n}: {v}\r\n"))
+        .collect();
     write!(
         stream,
-        "{method} {target} HTTP/1.1\r\nHost: {host}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+        "{method} {target} HTTP/1.1\r\nHost: {host}\r\n{extra}Content-Length: {}\r\nConnection: close\r\n\r\n",
         body.len()
     )
     .unwrap();

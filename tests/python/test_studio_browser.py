@@ -11,9 +11,11 @@ import pytest
 from conftest import BIN, ROOT, tool
 
 RUNNER = ROOT / "tests" / "node" / "studio.mjs"
+HOSTILE = ROOT / "tests" / "node" / "studio-hostile.mjs"
 
 
-def test_the_studio_works_in_chromium(tmp_path):
+def browser_tools():
+    """node, with chromium and playwright-core; under CI=true a missing one fails."""
     node = tool("node")
     tool("chromium")
     if not (ROOT / "tests" / "node" / "node_modules" / "playwright-core").exists():
@@ -21,6 +23,25 @@ def test_the_studio_works_in_chromium(tmp_path):
         if os.environ.get("CI") == "true":
             pytest.fail(msg)
         pytest.skip(msg)
+    return node
+
+
+def test_the_studio_refuses_hostile_pages_and_file_names(tmp_path):
+    """A PNG named like markup lists as text under a CSP that forbids inline
+    script; another site's page cannot write, save, edit or frame it."""
+    run = subprocess.run(
+        [browser_tools(), str(HOSTILE), str(BIN), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    print(run.stdout)
+    assert run.returncode == 0, f"{run.stdout}\n{run.stderr}"
+    assert "FAIL" not in run.stdout
+
+
+def test_the_studio_works_in_chromium(tmp_path):
+    node = browser_tools()
     screenshot = ROOT / "target" / "studio-screenshot.png"
     run = subprocess.run(
         [node, str(RUNNER), str(BIN), str(tmp_path), str(screenshot)],

@@ -1,0 +1,524 @@
+"use strict";
+const $ = (id) => document.getElementById(id);
+const studio = { keys: [], values: {}, revision: 0, frames: 0, yaw: 0.6, pitch: 0.7, distance: 0, lastFrameMs: null };
+window.studio = studio;
+
+function setStatus(text) { $("status").textContent = text; }
+
+async function api(path, options) {
+  const response = await fetch(path, options);
+  return response;
+}
+
+// ---- spec form -------------------------------------------------------------
+
+function tomlValue(v) {
+  if (typeof v === "boolean") return v ? "true" : "false";
+  if (typeof v === "number") return Number.isFinite(v) ? String(v) : JSON.stringify(String(v));
+  return JSON.stringify(v);
+}
+
+function toToml(values) {
+  let out = "";
+  for (const [table, entries] of Object.entries(values)) {
+    if (typeof entries !== "object" || entries === null) continue;
+    const keys = Object.entries(entries);
+    if (!keys.length) continue;
+    out += `[${table}]\n`;
+    for (const [k, v] of keys) out += `${k} = ${tomlValue(v)}\n`;
+    out += "\n";
+  }
+  return out;
+}
+
+function fieldValue(key) {
+  const [t, k] = key.split(".");
+  return studio.values[t] ? studio.values[t][k] : undefined;
+}
+
+function buildForm() {
+  const form = $("form");
+  form.replaceChildren();
+  let fieldset = null, table = null;
+  for (const doc of studio.keys) {
+    const [t, k] = doc.key.split(".");
+    if (t !== table) {
+      table = t;
+      fieldset = document.createElement("fieldset");
+      const legend = document.createElement("legend");
+      legend.textContent = `[${t}]`;
+      fieldset.appendChild(legend);
+      form.appendChild(fieldset);
+    }
+    const div = document.createElement("div");
+    div.className = "field";
+    div.dataset.key = doc.key;
+    const id = "f-" + doc.key.replace(".", "-");
+    const label = document.createElement("label");
+    label.htmlFor = id; label.textContent = k + (doc.unit ? ` (${doc.unit})` : ""); label.title = doc.meaning;
+    let input;
+    const kind = doc.kind.type;
+    if (kind === "choice" || kind === "bool") {
+      input = document.createElement("select");
+      const choices = kind === "bool" ? ["true", "false"] : doc.kind.choices;
+      input.add(new Option("(default)", ""));
+      for (const c of choices) input.add(new Option(c, c));
+    } else {
+      input = document.createElement("input");
+      input.type = "text";
+      input.placeholder = doc.default;
+    }
+    input.id = id; input.name = doc.key;
+    input.addEventListener("change", () => edit(doc, input.value));
+    const hint = document.createElement("div");
+    hint.className = "hint";
+    hint.textContent = `default ${doc.default} · ${doc.range}`;
+    hint.title = doc.meaning;
+    const error = document.createElement("div");
+    error.className = "error";
+    div.append(label, input, hint, error);
+    fieldset.appendChild(div);
+  }
+}
+
+function setProfileChoices(profiles) {
+  const doc = studio.keys.find((d) => d.key === "profile.image");
+  const old = document.querySelector('[data-key="profile.image"] input');
+  if (!doc || !old) return;
+  const select = document.createElement("select");
+  select.id = old.id; select.name = old.name;
+  // every name from the server is text, never markup
+  select.add(new Option("(none)", ""));
+  for (const p of profiles) select.add(new Option(p, p));
+  select.addEventListener("change", () => edit(doc, select.value));
+  old.replaceWith(select);
+}
+
+function fillForm() {
+  for (const doc of studio.keys) {
+    const input = $("f-" + doc.key.replace(".", "-"));
+    if (!input) continue;
+    const v = fieldValue(doc.key);
+    const text = v === undefined ? "" : String(v);
+    if (input.tagName === "SELECT" && text && ![...input.options].some((o) => o.value === text)) {
+      input.add(new Option(text, text));
+    }
+    input.value = text;
+  }
+}
+
+function parseField(doc, text) {
+  const kind = doc.kind.type;
+  if (text.trim() === "") return undefined;
+  if (kind === "bool") return text === "true";
+  if (kind === "number" || kind === "distance") {
+    const n = Number(text);
+    return text.trim() !== "" && Number.isFinite(n) ? n : text;
+  }
+  return text;
+}
+
+function clearErrors() {
+  for (const f of document.querySelectorAll(".field.invalid")) f.classList.remove("invalid");
+  for (const e of document.querySelectorAll(".field .error")) e.textContent = "";
+  $("spec-error").textContent = "";
+}
+
+function showErrors(errors) {
+  clearErrors();
+  for (const e of errors) {
+    const field = e.key && document.querySelector(`.field[data-key="${e.key}"]`);
+    const text = e.cli || e.message;
+    if (field) {
+      field.classList.add("invalid");
+      const doc = studio.keys.find((d) => d.key === e.key);
+      field.querySelector(".error").textContent = text + (doc ? `\n  Range: ${doc.range}${doc.unit ? " " + doc.unit : ""}` : "");
+      field.scrollIntoView({ block: "nearest" });
+    } else {
+      $("spec-error").textContent = text;
+    }
+  }
+  setStatus(`refused: ${errors.map((e) => e.key || "TOML").join(", ")} (the last good design stays)`);
+}
+
+function edit(doc, text) {
+  const [t, k] = doc.key.split(".");
+  const values = JSON.parse(JSON.stringify(studio.values));
+  values[t] = values[t] || {};
+  const v = parseField(doc, text);
+  if (v === undefined) delete values[t][k]; else values[t][k] = v;
+  if (doc.key === "profile.image" && v !== undefined) {
+    values.profile.kind = "image";
+  }
+  putSpec(toToml(values));
+}
+
+async function putSpec(text) {
+  setStatus("checking the spec…");
+  const response = await api("/api/spec", { method: "PUT", body: text, headers: { "content-type": "application/toml" } });
+  const body = await response.json().catch(() => ({}));
+  if (response.status === 422) { showErrors(body.errors || []); return false; }
+  if (!response.ok) { $("spec-error").textContent = body.error || `HTTP ${response.status}`; return false; }
+  clearErrors();
+  applyState(body);
+  return true;
+}
+
+function applyState(state) {
+  studio.values = state.values;
+  studio.revision = state.revision;
+  studio.design = state.design;
+  studio.derived = state.derived;
+  $("toml").value = state.spec;
+  $("revision").textContent = `revision ${state.revision}`;
+  $("spec-file").textContent = state.spec_file;
+  $("out-dir").textContent = `into ${state.out}`;
+  fillForm();
+  showView();
+  showLightPickers();
+  const d = state.derived;
+  setStatus(`${d.N} lenses on a ${state.design.surface}, ${state.design.width_mm} × ${state.design.height_mm} mm; D_s ${d.D_s.toFixed(4)} mm`);
+  requestFrame();
+  loadReport();
+  if (view.showing === "mold") showMold(); else showDevice();
+}
+
+// ---- moiré -----------------------------------------------------------------
+
+// The sliders tilt from the design view ([view]); tilt 0 is the view the
+// base is compensated for. The checkbox is view.compensate.
+function showView() {
+  const compensate = fieldValue("view.compensate");
+  $("compensate").checked = compensate === undefined ? true : compensate === true;
+  const tilt = fieldValue("view.tilt") || 0, along = fieldValue("view.tilt_along") || 0;
+  $("view-note").textContent = tilt || along ? `tilt 0 is the design view (${tilt}°, ${along}° along)` : "tilt 0 is the design view (straight down)";
+}
+$("compensate").addEventListener("change", () => {
+  const doc = studio.keys.find((d) => d.key === "view.compensate");
+  if (doc) edit(doc, $("compensate").checked ? "true" : "false");
+});
+
+// While a slider moves, frames use 9 lens phases per pixel (samples=3,
+// about half the time); when it is let go, the default 16 (samples=4).
+let frameInFlight = false, framePending = null;
+
+// a printed device has one backlight; a dual-lens device, lights from +x and −x
+const printed = () => studio.design && studio.design.base_kind === "printed";
+
+function lightsParam() {
+  const choice = $("lights").value;
+  if (choice !== "custom") return choice;
+  return printed() ? $("light-a").value : `${$("light-a").value},${$("light-b").value}`;
+}
+
+function showLightPickers() {
+  const custom = $("lights").value === "custom";
+  $("light-a").hidden = !custom;
+  $("light-b").hidden = !custom || printed();
+}
+
+async function requestFrame(samples = 4) {
+  if (frameInFlight) { framePending = Math.max(framePending || 0, samples); return; }
+  frameInFlight = true; framePending = null;
+  const tilt = $("tilt").value, along = $("along").value;
+  $("tilt-value").textContent = `${Number(tilt).toFixed(2)}°`;
+  $("along-value").textContent = `${Number(along).toFixed(2)}°`;
+  const params = new URLSearchParams({ tilt, along, size: "256", samples: String(samples), lights: lightsParam() });
+  try {
+    const response = await api("/api/frame.png?" + params);
+    if (response.ok) {
+      const blob = await response.blob();
+      const old = $("frame").src;
+      $("frame").src = URL.createObjectURL(blob);
+      if (old.startsWith("blob:")) URL.revokeObjectURL(old);
+      const h = (n) => Number(response.headers.get(n));
+      studio.frames += 1;
+      studio.lastFrameMs = h("x-render-ms");
+      $("frame").dataset.tilt = tilt;
+      $("frame").dataset.samples = samples;
+      $("scores").textContent = `contrast ${h("x-contrast").toFixed(3)} · fidelity ${h("x-fidelity").toFixed(3)} · local ${h("x-local-fidelity").toFixed(3)} · ${h("x-render-ms").toFixed(0)} ms, ${samples * samples} lens phases`;
+    } else if (response.status !== 409) {
+      const body = await response.json().catch(() => ({}));
+      $("scores").textContent = body.error || `HTTP ${response.status}`;
+    }
+  } finally {
+    frameInFlight = false;
+    if (framePending) requestFrame(framePending);
+  }
+}
+
+for (const id of ["tilt", "along"]) {
+  $(id).addEventListener("input", () => requestFrame(3));
+  $(id).addEventListener("change", () => requestFrame(4));
+}
+$("lights").addEventListener("change", () => {
+  showLightPickers();
+  requestFrame();
+});
+for (const id of ["light-a", "light-b"]) $(id).addEventListener("change", () => requestFrame());
+
+// ---- checks ----------------------------------------------------------------
+
+async function loadReport() {
+  const revision = studio.revision;
+  $("checks-status").textContent = "building the device and measuring it…";
+  const response = await api("/api/report");
+  const report = await response.json().catch(() => ({}));
+  if (revision !== studio.revision) return;
+  const list = $("check-list");
+  list.replaceChildren();
+  if (!response.ok) {
+    const fail = document.createElement("span");
+    fail.className = "fail";
+    fail.textContent = report.error;
+    $("checks-status").replaceChildren(fail);
+    return;
+  }
+  const checks = (report.checks || []).concat(report.mold ? report.mold.checks : []);
+  const failed = checks.filter((c) => !c.passed).length;
+  $("checks-status").textContent = `${checks.length} checks, ${failed} failed; ${report.mesh.triangles} triangles`;
+  for (const c of checks) {
+    const li = document.createElement("li");
+    li.title = c.detail;
+    li.innerHTML = `<span class="${c.passed ? "pass" : "fail"}">${c.passed ? "✓" : "✗"}</span><span></span><span class="scores"></span>`;
+    li.children[1].textContent = c.name;
+    li.children[2].textContent = `${Number(c.value).toPrecision(3)} / ${Number(c.limit).toPrecision(3)} ${c.unit}`;
+    list.appendChild(li);
+  }
+  const warnings = ((report.view && report.view.warnings) || []).concat(report.mold ? report.mold.warnings : []);
+  $("warnings").replaceChildren();
+  for (const w of warnings) { const p = document.createElement("div"); p.className = "warn"; p.textContent = "warning: " + w; $("warnings").appendChild(p); }
+}
+
+// ---- explore ---------------------------------------------------------------
+
+$("run-explore").addEventListener("click", async () => {
+  $("explore-status").textContent = "scoring 25 cells…";
+  const response = await api("/api/explore");
+  const grid = await response.json();
+  if (!response.ok) { $("explore-status").textContent = grid.error; return; }
+  const box = $("grid");
+  box.replaceChildren();
+  grid.cells.forEach((cell, i) => {
+    const fig = document.createElement("figure");
+    if (i === grid.best) fig.className = "best";
+    const contrast = cell.contrast == null ? "invalid"
+      : cell.kept_contrast == null ? `contrast ${cell.contrast.toFixed(3)}`
+      : `kept ${cell.kept_contrast.toFixed(2)}`;
+    fig.innerHTML = `<img alt=""><figcaption></figcaption>`;
+    fig.firstChild.src = grid.thumbnails[i];
+    fig.lastChild.textContent = `a ${cell.a} · d ${cell.d_over_ds}·D_s · ${contrast}`;
+    fig.title = cell.invalid || `d = ${cell.d_mm.toFixed(4)} mm; click to adopt a and d`;
+    if (cell.contrast != null) fig.addEventListener("click", () => adopt(cell));
+    box.appendChild(fig);
+  });
+  $("explore-status").textContent = `best: a ${grid.cells[grid.best].a}, d ${grid.cells[grid.best].d_over_ds}·D_s (outlined)`;
+});
+
+function adopt(cell) {
+  const values = JSON.parse(JSON.stringify(studio.values));
+  values.base = values.base || {};
+  values.base.a = cell.a;
+  values.base.d = Number(cell.d_mm.toFixed(6));
+  putSpec(toToml(values));
+}
+
+// ---- 3D view ---------------------------------------------------------------
+
+const view = { gl: null, program: null, meshes: [], showing: "device", centre: [0, 0, 0], radius: 1, explode: 0.4 };
+window.studio.view = view;
+
+function initGl() {
+  const canvas = $("view3d");
+  const gl = canvas.getContext("webgl", { antialias: true });
+  if (!gl) { $("view-status").textContent = "WebGL is not available in this browser"; return; }
+  const vs = `attribute vec3 p; attribute vec3 n; uniform mat4 m; uniform vec3 offset; varying vec3 vn;
+    void main() { vn = n; gl_Position = m * vec4(p + offset, 1.0); }`;
+  const fs = `precision mediump float; varying vec3 vn; uniform vec3 colour; uniform vec3 light;
+    void main() { float l = 0.25 + 0.75 * abs(dot(normalize(vn), light)); gl_FragColor = vec4(colour * l, 1.0); }`;
+  const shader = (type, source) => { const s = gl.createShader(type); gl.shaderSource(s, source); gl.compileShader(s); return s; };
+  const program = gl.createProgram();
+  gl.attachShader(program, shader(gl.VERTEX_SHADER, vs));
+  gl.attachShader(program, shader(gl.FRAGMENT_SHADER, fs));
+  gl.linkProgram(program);
+  view.gl = gl; view.program = program;
+  gl.enable(gl.DEPTH_TEST);
+}
+
+function parseStl(buffer) {
+  const data = new DataView(buffer);
+  const count = data.getUint32(80, true);
+  const positions = new Float32Array(count * 9), normals = new Float32Array(count * 9);
+  const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+  for (let t = 0; t < count; t++) {
+    const base = 84 + t * 50;
+    const nx = data.getFloat32(base, true), ny = data.getFloat32(base + 4, true), nz = data.getFloat32(base + 8, true);
+    for (let v = 0; v < 3; v++) {
+      for (let a = 0; a < 3; a++) {
+        const x = data.getFloat32(base + 12 + v * 12 + a * 4, true);
+        positions[t * 9 + v * 3 + a] = x;
+        if (x < lo[a]) lo[a] = x; if (x > hi[a]) hi[a] = x;
+      }
+      normals[t * 9 + v * 3] = nx; normals[t * 9 + v * 3 + 1] = ny; normals[t * 9 + v * 3 + 2] = nz;
+    }
+  }
+  return { positions, normals, count, lo, hi };
+}
+
+async function loadMeshes(parts) {
+  const revision = studio.revision;
+  $("view-status").textContent = "building…";
+  const loaded = [];
+  for (const [url, colour, lift] of parts) {
+    const response = await api(url);
+    if (!response.ok) {
+      const body = await response.json().catch(() => ({}));
+      $("view-status").textContent = body.error || `HTTP ${response.status}`;
+      return;
+    }
+    loaded.push({ stl: parseStl(await response.arrayBuffer()), colour, lift });
+  }
+  if (revision !== studio.revision || !view.gl) return;
+  const gl = view.gl;
+  for (const m of view.meshes) { gl.deleteBuffer(m.pb); gl.deleteBuffer(m.nb); }
+  view.meshes = loaded.map(({ stl, colour, lift }) => {
+    const pb = gl.createBuffer(); gl.bindBuffer(gl.ARRAY_BUFFER, pb); gl.bufferData(gl.ARRAY_BUFFER, stl.positions, gl.STATIC_DRAW);
+    const nb = gl.createBuffer(); gl.bindBuffer(gl.ARRAY_BUFFER, nb); gl.bufferData(gl.ARRAY_BUFFER, stl.normals, gl.STATIC_DRAW);
+    return { pb, nb, count: stl.count * 3, colour, lift, lo: stl.lo, hi: stl.hi };
+  });
+  const lo = [0, 1, 2].map((a) => Math.min(...view.meshes.map((m) => m.lo[a])));
+  const hi = [0, 1, 2].map((a) => Math.max(...view.meshes.map((m) => m.hi[a])));
+  view.centre = [0, 1, 2].map((a) => (lo[a] + hi[a]) / 2);
+  view.radius = Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / 2;
+  view.height = hi[2] - lo[2];
+  if (!studio.distance) studio.distance = 3 * view.radius;
+  const triangles = loaded.reduce((s, m) => s + m.stl.count, 0);
+  $("view-status").textContent = `${triangles.toLocaleString()} triangles · drag to orbit, wheel to zoom`;
+  draw();
+}
+
+function showDevice() { view.showing = "device"; studio.distance = 0; loadMeshes([["/api/device.stl", [0.55, 0.75, 0.95], 0]]); }
+async function showMold() {
+  view.showing = "mold"; studio.distance = 0;
+  await loadMeshes([["/api/mold/top.stl", [0.95, 0.6, 0.25], 1], ["/api/mold/bottom.stl", [0.35, 0.7, 0.65], -1], ["/api/mold/device.stl", [0.55, 0.75, 0.95], 0]]);
+  loadReport(); // now with the mold's checks and warnings
+}
+$("show-device").addEventListener("click", showDevice);
+$("show-mold").addEventListener("click", showMold);
+$("explode").addEventListener("input", () => { view.explode = Number($("explode").value); draw(); });
+
+function multiply(a, b) {
+  const out = new Float32Array(16);
+  for (let i = 0; i < 4; i++) for (let j = 0; j < 4; j++) {
+    let s = 0; for (let k = 0; k < 4; k++) s += a[k * 4 + j] * b[i * 4 + k]; out[i * 4 + j] = s;
+  }
+  return out;
+}
+
+function matrix() {
+  const canvas = $("view3d");
+  const aspect = canvas.width / canvas.height, d = studio.distance || 3 * view.radius;
+  const f = 1 / Math.tan(Math.PI / 8), near = Math.max(d - 2 * view.radius, d * 0.01), far = d + 2 * view.radius;
+  const projection = new Float32Array([f / aspect, 0, 0, 0, 0, f, 0, 0, 0, 0, (far + near) / (near - far), -1, 0, 0, 2 * far * near / (near - far), 0]);
+  const cy = Math.cos(studio.yaw), sy = Math.sin(studio.yaw), cp = Math.cos(studio.pitch), sp = Math.sin(studio.pitch);
+  // eye on a sphere around the centre, z up
+  const eye = [view.centre[0] + d * cp * sy, view.centre[1] - d * cp * cy, view.centre[2] + d * sp];
+  const fwd = [view.centre[0] - eye[0], view.centre[1] - eye[1], view.centre[2] - eye[2]].map((x) => x / d);
+  let right = [fwd[1] * 1 - fwd[2] * 0, fwd[2] * 0 - fwd[0] * 1, 0];
+  const rl = Math.hypot(...right) || 1; right = right.map((x) => x / rl);
+  const up = [right[1] * fwd[2] - right[2] * fwd[1], right[2] * fwd[0] - right[0] * fwd[2], right[0] * fwd[1] - right[1] * fwd[0]];
+  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  const viewMatrix = new Float32Array([right[0], up[0], -fwd[0], 0, right[1], up[1], -fwd[1], 0, right[2], up[2], -fwd[2], 0, -dot(right, eye), -dot(up, eye), dot(fwd, eye), 1]);
+  view.light = fwd.map((x) => -x);
+  return multiply(projection, viewMatrix);
+}
+
+function draw() {
+  const gl = view.gl;
+  if (!gl) return;
+  gl.viewport(0, 0, gl.canvas.width, gl.canvas.height);
+  gl.clearColor(0.125, 0.14, 0.16, 1);
+  gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+  if (!view.meshes.length) return;
+  gl.useProgram(view.program);
+  gl.uniformMatrix4fv(gl.getUniformLocation(view.program, "m"), false, matrix());
+  gl.uniform3fv(gl.getUniformLocation(view.program, "light"), view.light);
+  const p = gl.getAttribLocation(view.program, "p"), n = gl.getAttribLocation(view.program, "n");
+  for (const m of view.meshes) {
+    gl.uniform3fv(gl.getUniformLocation(view.program, "colour"), m.colour);
+    gl.uniform3fv(gl.getUniformLocation(view.program, "offset"), [0, 0, m.lift * view.explode * (view.height || 1)]);
+    gl.bindBuffer(gl.ARRAY_BUFFER, m.pb); gl.enableVertexAttribArray(p); gl.vertexAttribPointer(p, 3, gl.FLOAT, false, 0, 0);
+    gl.bindBuffer(gl.ARRAY_BUFFER, m.nb); gl.enableVertexAttribArray(n); gl.vertexAttribPointer(n, 3, gl.FLOAT, false, 0, 0);
+    gl.drawArrays(gl.TRIANGLES, 0, m.count);
+  }
+}
+
+(() => {
+  const canvas = $("view3d");
+  let dragging = null;
+  canvas.addEventListener("pointerdown", (e) => { dragging = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); });
+  canvas.addEventListener("pointerup", () => { dragging = null; });
+  canvas.addEventListener("pointermove", (e) => {
+    if (!dragging) return;
+    studio.yaw += (e.clientX - dragging[0]) * 0.01;
+    studio.pitch = Math.max(-1.5, Math.min(1.5, studio.pitch + (e.clientY - dragging[1]) * 0.01));
+    dragging = [e.clientX, e.clientY];
+    draw();
+  });
+  canvas.addEventListener("wheel", (e) => {
+    e.preventDefault();
+    studio.distance = Math.max(view.radius * 0.2, (studio.distance || 3 * view.radius) * Math.exp(e.deltaY * 0.001));
+    draw();
+  }, { passive: false });
+})();
+
+// ---- write -----------------------------------------------------------------
+
+let stageTotal = 1, stageDone = 0;
+function listenForEvents() {
+  const events = new EventSource("/api/events");
+  events.onmessage = (message) => {
+    const e = JSON.parse(message.data);
+    if (e.kind === "start") { $("write-error").textContent = ""; $("written").textContent = ""; $("write-stage").textContent = `writing the ${e.what}…`; }
+    if (e.kind === "stage") { stageTotal = Math.max(1, e.total); stageDone = 0; $("write-stage").textContent = e.name; $("write-progress").max = stageTotal; $("write-progress").value = 0; }
+    if (e.kind === "tick") { stageDone += e.n; $("write-progress").value = stageDone; }
+    if (e.kind === "done") {
+      $("write-stage").textContent = `done: ${(e.bytes / 1e6).toFixed(1)} MB`;
+      $("write-progress").value = $("write-progress").max;
+      $("written").textContent = e.written.map((w) => "wrote " + w).join("\n") + e.warnings.map((w) => "\nwarning: " + w).join("");
+      setButtons(false);
+      if (e.what === "mold") loadReport();
+    }
+    if (e.kind === "error") { $("write-stage").textContent = "failed"; $("write-error").textContent = e.message; setButtons(false); }
+  };
+}
+function setButtons(busy) { $("write-device").disabled = busy; $("write-mold").disabled = busy; }
+async function write(what) {
+  setButtons(true);
+  const response = await api(`/api/write?what=${what}`, { method: "POST" });
+  if (response.status !== 202) {
+    const body = await response.json().catch(() => ({}));
+    $("write-error").textContent = body.error || `HTTP ${response.status}`;
+    setButtons(false);
+  }
+}
+$("write-device").addEventListener("click", () => write("device"));
+$("write-mold").addEventListener("click", () => write("mold"));
+
+// ---- start -----------------------------------------------------------------
+
+$("apply-toml").addEventListener("click", () => putSpec($("toml").value));
+$("save").addEventListener("click", async () => {
+  const response = await api("/api/save", { method: "POST" });
+  const body = await response.json().catch(() => ({}));
+  setStatus(response.ok ? `saved ${body.saved}` : body.error || `HTTP ${response.status}`);
+});
+
+(async () => {
+  initGl();
+  listenForEvents();
+  studio.keys = await (await api("/api/keys")).json();
+  buildForm();
+  setProfileChoices(await (await api("/api/profiles")).json());
+  applyState(await (await api("/api/state")).json());
+})();

@@ -1,0 +1,167 @@
+//! `moirecast studio` against hostile input (issue 44): formulas that
+//! aborted the process, writes from another site, and the headers that
+//! keep the page from being framed or running injected script. The browser
+//! side (a file named like markup, another site's page) is
+//! tests/node/studio-hostile.mjs.
+
+mod common;
+
+use common::http::{self, Response};
+use common::{scratch, Scratch, SMALL};
+
+struct Studio {
+    port: u16,
+    dir: Scratch,
+}
+
+impl Studio {
+    fn start(name: &str) -> Studio {
+        let dir = scratch("studio-hostile", name);
+        std::fs::write(dir.join("design.toml"), SMALL).unwrap();
+        let port = http::start_studio(dir.join("design.toml"), dir.join("out"));
+        Studio { port, dir }
+    }
+
+    fn host(&self) -> String {
+        format!("127.0.0.1:{}", self.port)
+    }
+
+    fn send(&self, method: &str, target: &str, headers: &[(&str, &str)], body: &[u8]) -> Response {
+        http::request_with(self.port, &self.host(), method, target, headers, body)
+    }
+}
+
+/// The formulas of issue 44 that overflowed the studio's stack: each is
+/// refused at `surface.z` by its named rule (or parses), and the studio
+/// answers the next request.
+#[test]
+fn formulas_that_aborted_the_studio_are_refused_by_name() {
+    let studio = Studio::start("formulas");
+    let sum = |n: usize| {
+        (0..n)
+            .map(|i| format!("x*y/{}", 1000 + i))
+            .collect::<Vec<_>>()
+            .join("+")
+    };
+    let nested = |d: usize| (0..d).fold("x".to_string(), |f, _| format!("sin({f})"));
+    let cases = [
+        (sum(18), "formula-operations"),
+        (sum(200), "formula-length"),
+        (nested(9), "formula-depth"),
+        (
+            (0..20)
+                .map(|i| format!("sin(x/{})", i + 1))
+                .collect::<Vec<_>>()
+                .join("+"),
+            "formula-operations",
+        ),
+        (
+            (0..10)
+                .map(|_| "(x+y)".to_string())
+                .collect::<Vec<_>>()
+                .join("*"),
+            "formula-derivatives",
+        ),
+    ];
+    for (z, rule) in cases {
+        let spec = format!(
+            "[surface]\nkind = \"formula\"\nz = \"{z}\"\n[profile]\nkind = \"bump\"\nsigma = 1.5\n"
+        );
+        let r = studio.send("PUT", "/api/spec", &[], spec.as_bytes());
+        assert_eq!(r.status, 422, "{}", String::from_utf8_lossy(&r.body));
+        let errors = r.json()["errors"].clone();
+        assert_eq!(errors[0]["key"], "surface.z", "{errors}");
+        assert!(
+            errors[0]["message"].as_str().unwrap().contains(rule),
+            "{rule}: {errors}"
+        );
+    }
+    // a product within the budget parses, and the design is built
+    let five = (0..5)
+        .map(|i| format!("(x/30+{i})"))
+        .collect::<Vec<_>>()
+        .join("*");
+    let spec = format!("[surface]\nkind = \"formula\"\nz = \"{five}/1000\"\n[layout]\nwidth = 4.0\nheight = 3.0\n[profile]\nkind = \"bump\"\nsigma = 1.5\n");
+    let r = studio.send("PUT", "/api/spec", &[], spec.as_bytes());
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(studio.send("GET", "/api/state", &[], b"").status, 200);
+}
+
+/// A request that changes state from another origin is refused, whatever
+/// its content type; the studio's own origin and tools that send no
+/// Origin (curl) are not. Every answer refuses framing and carries the CSP.
+#[test]
+fn writes_from_another_site_are_refused() {
+    let studio = Studio::start("cross-site");
+    let own = format!("http://{}", studio.host());
+    let spec = SMALL.replace("period = 0.5", "period = 1.0");
+    let refused = [
+        (
+            "POST",
+            "/api/write?what=device",
+            vec![
+                ("Origin", "http://evil.example"),
+                ("Content-Type", "text/plain"),
+            ],
+        ),
+        (
+            "POST",
+            "/api/save",
+            vec![
+                ("Origin", "http://evil.example"),
+                ("Content-Type", "text/plain"),
+            ],
+        ),
+        ("PUT", "/api/spec", vec![("Origin", "null")]),
+        ("POST", "/api/save", vec![("Sec-Fetch-Site", "cross-site")]),
+        (
+            "POST",
+            "/api/save",
+            vec![("Origin", own.as_str()), ("Sec-Fetch-Site", "same-site")],
+        ),
+    ];
+    for (method, target, headers) in &refused {
+        let r = studio.send(method, target, headers, spec.as_bytes());
+        assert_eq!(
+            r.status,
+            403,
+            "{method} {target} {headers:?}: {}",
+            String::from_utf8_lossy(&r.body)
+        );
+    }
+    assert!(!studio.dir.join("out").exists(), "nothing was written");
+    assert_eq!(
+        std::fs::read_to_string(studio.dir.join("design.toml")).unwrap(),
+        SMALL
+    );
+    assert_eq!(
+        studio.send("GET", "/api/state", &[], b"").json()["values"]["layout"]["period"],
+        0.5
+    );
+    // the page itself, and curl
+    let ours = [("Origin", own.as_str()), ("Sec-Fetch-Site", "same-origin")];
+    assert_eq!(
+        studio
+            .send("PUT", "/api/spec", &ours, spec.as_bytes())
+            .status,
+        200
+    );
+    assert_eq!(studio.send("POST", "/api/save", &[], b"").status, 200);
+    // reading is not refused, and every answer carries the headers
+    let page = studio.send("GET", "/", &[("Origin", "http://evil.example")], b"");
+    assert_eq!(page.status, 200);
+    let csp = page.header("content-security-policy").unwrap_or_default();
+    assert!(
+        csp.contains("script-src 'self'") && csp.contains("frame-ancestors 'none'"),
+        "{csp}"
+    );
+    assert_eq!(page.header("x-frame-options"), Some("DENY"));
+    let script = studio.send("GET", "/studio.js", &[], b"");
+    assert_eq!(script.status, 200);
+    assert!(script
+        .header("content-type")
+        .unwrap()
+        .starts_with("text/javascript"));
+    let html = String::from_utf8_lossy(&page.body);
+    assert!(!html.contains("<script>"), "no inline script on the page");
+}
