@@ -73,7 +73,7 @@ pub fn keys() -> Vec<KeyDoc> {
     vec![
         doc("surface.kind", Choice(&["plane", "saddle", "paraboloid", "cylinder", "sphere", "formula"]), None, "plane, saddle, paraboloid, cylinder, sphere, formula".into(), "", "The pitch surface f through the lens creases (METHOD §1)."),
         doc("surface.radius", Number, None, "≠ 0; lens flanks (slope + AFOV/2) at most 80°".into(), "mm", "Radius of curvature. Paraboloid and sphere: + bowl, − dome; cylinder: + bends down, − up. Not used by plane and formula."),
-        doc("surface.z", Text, Some("(none)"), "a formula in x and y (mm from the centre)".into(), "mm", "kind = \"formula\": z = h(x, y), e.g. \"(x*x - y*y)/120\"."),
+        doc("surface.z", Text, Some("(none)"), format!("a formula in x and y (mm from the centre); at most {} characters, {} operations, {} powers, parentheses {} deep", moirecast_kernel::formula::MAX_CHARS, moirecast_kernel::formula::MAX_OPERATIONS, moirecast_kernel::formula::MAX_POWERS, moirecast_kernel::formula::MAX_DEPTH), "mm", "kind = \"formula\": z = h(x, y), e.g. \"(x*x - y*y)/120\"."),
         doc("layout.width", Number, None, format!("a whole number of periods, at most {} lenses", design::MAX_LENSES), "mm", "Width across the lenses (u, along x)."),
         doc("layout.height", Number, None, positive(), "mm", "Height along the lenses (v, along y)."),
         doc("layout.period", Number, None, between(design::PERIOD_MM), "mm", "Lens period T."),
