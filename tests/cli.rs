@@ -218,6 +218,20 @@ fn outputs_are_byte_identical_across_runs() {
     }
 }
 
+/// A layout a kilometre wide with an image is refused for its width (it
+/// blamed the image: "the shape is empty").
+#[test]
+fn a_huge_layout_with_an_image_blames_the_width() {
+    let dir = scratch("huge-width");
+    let spec = "[layout]\nwidth = 1000000.0\n[profile]\nimage = \"profiles/horse.png\"\n";
+    let (ok, err, out) = run(spec, &dir);
+    assert!(
+        !ok && err.contains("`layout.width`") && !err.contains("profile.image"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
 /// A formula of 200 terms aborted the command line (its parser overflowed
 /// the stack): it is refused at `surface.z` by the formula budget's rule,
 /// and nothing is written.

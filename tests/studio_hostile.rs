@@ -165,3 +165,53 @@ fn writes_from_another_site_are_refused() {
     let html = String::from_utf8_lossy(&page.body);
     assert!(!html.contains("<script>"), "no inline script on the page");
 }
+
+/// `/api/explore/+1.png` is no cell (it answered 200), and an image path
+/// says the same whether it is missing, a folder, or a link leading out of
+/// the spec's folder: nothing of what exists outside it.
+#[test]
+fn paths_tell_nothing_of_what_exists_outside() {
+    let studio = Studio::start("paths");
+    for target in [
+        "/api/explore/+1.png",
+        "/api/explore/-0.png",
+        "/api/explore/.png",
+    ] {
+        assert_eq!(studio.send("GET", target, &[], b"").status, 404, "{target}");
+    }
+    let outside = studio
+        .dir
+        .join("..")
+        .join(format!("outside-{}.png", std::process::id()));
+    std::fs::copy(
+        concat!(env!("CARGO_MANIFEST_DIR"), "/molds/profiles/horse.png"),
+        &outside,
+    )
+    .unwrap();
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(&outside, studio.dir.join("link.png")).unwrap();
+    std::fs::create_dir_all(studio.dir.join("folder.png")).unwrap();
+    let message = |image: &str| {
+        let spec = format!("{SMALL}\n").replace(
+            "[profile]\nkind = \"bump\"\nsigma = 1.5",
+            &format!("[profile]\nimage = \"{image}\""),
+        );
+        let r = studio.send("PUT", "/api/spec", &[], spec.as_bytes());
+        assert_eq!(
+            r.status,
+            422,
+            "{image}: {}",
+            String::from_utf8_lossy(&r.body)
+        );
+        r.json()["errors"][0]["message"]
+            .as_str()
+            .unwrap()
+            .to_string()
+    };
+    let missing = message("missing.png");
+    assert_eq!(message("folder.png"), missing);
+    #[cfg(unix)]
+    assert_eq!(message("link.png"), missing);
+    assert!(missing.contains("inside the spec's folder"), "{missing}");
+    std::fs::remove_file(outside).unwrap();
+}

@@ -187,13 +187,17 @@ impl Studio {
             .ok()
             .and_then(|t| t.get("profile")?.get("image")?.as_str().map(str::to_owned))
         {
-            if !is_plain_relative(Path::new(&image)) {
+            let inside = match &self.home {
+                Home::File { dir, .. } => is_inside(dir, Path::new(&image)),
+                Home::Embedded => is_plain_relative(Path::new(&image)),
+            };
+            if !inside {
                 return Err(vec![json!({
                     "key": "profile.image",
                     "value": format!("{image:?}"),
-                    "message": "the studio reads images only inside the spec's folder",
+                    "message": "is not an image file inside the spec's folder (the studio reads no other)",
                     "fix": "pick an image from the list, or give a path relative to the spec's folder without `..`",
-                    "cli": format!("error: spec `{}`: `profile.image` = {image:?}: the studio reads images only inside the spec's folder.\n  Fix: give a path relative to the spec's folder without `..`", self.file_name()),
+                    "cli": format!("error: spec `{}`: `profile.image` = {image:?}: is not an image file inside the spec's folder (the studio reads no other).\n  Fix: pick an image from the list, or give a path relative to the spec's folder without `..`", self.file_name()),
                 })]);
             }
         }
@@ -220,6 +224,20 @@ impl Studio {
             "out": self.out.display().to_string(),
         })
     }
+}
+
+/// Whether `image` names a file inside `dir`: a plain relative path whose
+/// real path (symbolic links followed) lies within the folder's. One
+/// answer for a missing file, a folder and a link leading out, so the
+/// message tells nothing of what exists outside.
+fn is_inside(dir: &Path, image: &Path) -> bool {
+    if !is_plain_relative(image) {
+        return false;
+    }
+    let (Ok(root), Ok(real)) = (dir.canonicalize(), dir.join(image).canonicalize()) else {
+        return false;
+    };
+    real.starts_with(&root) && real.is_file()
 }
 
 /// A path with only normal components: no root, no `..`.
@@ -699,8 +717,10 @@ async fn explore_cell(
     UrlPath(cell): UrlPath<String>,
 ) -> Response {
     let rev = studio.current();
+    // digits only: `parse` would take `+1` too
     let Some(i) = cell
         .strip_suffix(".png")
+        .filter(|i| !i.is_empty() && i.bytes().all(|b| b.is_ascii_digit()))
         .and_then(|i| i.parse::<usize>().ok())
     else {
         return error(StatusCode::NOT_FOUND, format!("no cell `{cell}`"));

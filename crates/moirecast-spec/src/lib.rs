@@ -700,13 +700,16 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
     };
     // An image's grid must reach as far past the layout as the base reads
     // it: the design's margin, which neither the profile nor the view
-    // compensation changes (so this probe leaves the compensation out). A
-    // design refused here is refused again below, with its profile.
+    // compensation changes (so this probe leaves the compensation out).
     let reach = match raw.profile.image {
         Some(_) => {
             let mut probe = params.clone();
             probe.view.compensate = false;
-            Design::new(probe).map_or(0.0, |d| d.margin)
+            // a design refused without its profile (a layout a kilometre
+            // wide) is refused for that, before its image is resampled
+            Design::new(probe)
+                .map_err(|e| from_design_error(file, e))?
+                .margin
         }
         None => 0.0,
     };
