@@ -343,12 +343,18 @@ pub(crate) fn commit_with_report(
     report: &impl serde::Serialize,
     out: &Path,
 ) -> Result<(Vec<PathBuf>, usize)> {
-    files.add(
-        "report.json",
-        (serde_json::to_string_pretty(report)? + "\n").into_bytes(),
-    );
+    // the report lists every other file of the run with its SHA-256
+    #[derive(serde::Serialize)]
+    struct WithDigests<'a, R: serde::Serialize> {
+        #[serde(flatten)]
+        report: &'a R,
+        sha256: std::collections::BTreeMap<String, String>,
+    }
+    let sha256 = files.digests().into_iter().collect();
+    let text = serde_json::to_string_pretty(&WithDigests { report, sha256 })?;
+    files.add("report.json", (text + "\n").into_bytes());
     let bytes = files.sizes().iter().map(|(_, b)| b).sum();
-    Ok((files.commit(out)?, bytes))
+    Ok((files.commit_run(out)?, bytes))
 }
 
 /// What `moirecast mold` wrote, for the summary it prints.

@@ -218,6 +218,56 @@ fn outputs_are_byte_identical_across_runs() {
     }
 }
 
+/// An output folder holds one run: a `device` run after a `mold` run
+/// leaves none of the mold's files, report.json gives each file's SHA-256,
+/// and a folder of someone's own files is refused untouched.
+#[test]
+fn a_run_replaces_the_last_one_and_leaves_other_files_alone() {
+    let dir = scratch("one-run");
+    let (ok, err, out) = run_command("mold", SMALL, &dir);
+    assert!(ok, "{err}");
+    assert!(out.join("mold-top.stl").exists());
+    let (ok, err, _) = run(SMALL, &dir);
+    assert!(ok, "{err}");
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [".moirecast-run", "device.step", "device.stl", "report.json"]
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let digests = report["sha256"].as_object().unwrap();
+    assert_eq!(digests.len(), 2, "{digests:?}");
+    assert_eq!(digests["device.stl"].as_str().unwrap().len(), 64);
+    let mine = dir.join("mine");
+    std::fs::create_dir_all(&mine).unwrap();
+    std::fs::write(mine.join("notes.txt"), "mine").unwrap();
+    let o = Command::new(BIN)
+        .args([
+            "device",
+            dir.join("spec.toml").to_str().unwrap(),
+            "-o",
+            mine.to_str().unwrap(),
+            "-q",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("notes.txt") && err.contains("Fix:"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_dir(&mine).unwrap().count(),
+        1,
+        "the folder is untouched"
+    );
+}
+
 /// A layout a kilometre wide with an image is refused for its width (it
 /// blamed the image: "the shape is empty").
 #[test]

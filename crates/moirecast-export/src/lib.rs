@@ -23,6 +23,7 @@
 //! assert_eq!(written, vec![dir.join("device.stl")]);
 //! ```
 
+pub mod run_folder;
 mod threemf;
 
 pub use threemf::{model_xml, threemf_bytes, threemf_file, Material, Object, ThreemfFile};
@@ -40,6 +41,9 @@ pub enum ExportError {
         check: &'static str,
         detail: String,
     },
+    /// The output folder holds files no run wrote; nothing was written.
+    #[error("`{path}` holds files that no moirecast run wrote ({strangers}): a run replaces its folder whole, so that it holds exactly one run. Fix: write into an empty folder, a new one, or a run's")]
+    NotARunFolder { path: PathBuf, strangers: String },
     /// The operating system refused a write or rename.
     #[error("cannot write `{path}`: {source}")]
     Io {
@@ -157,8 +161,28 @@ impl OutputSet {
             .collect()
     }
 
-    /// Writes every staged file into `dir` (created if missing): all to
-    /// temporary names first, then all renamed. On error, temporaries are removed.
+    /// Replaces the run in `dir` with the staged files, as one swap of
+    /// folders ([`run_folder`]): the folder then holds exactly this run,
+    /// with a manifest of every file's SHA-256, or, on error, the last run
+    /// untouched. A folder of files no run wrote is refused.
+    pub fn commit_run(self, dir: &Path) -> Result<Vec<PathBuf>, ExportError> {
+        let written = run_folder::commit_run(&self.files, dir)?;
+        free_in_background(self.files);
+        Ok(written)
+    }
+
+    /// The hex SHA-256 of each staged file, by name (in parallel).
+    pub fn digests(&self) -> Vec<(String, String)> {
+        use rayon::prelude::*;
+        self.files
+            .par_iter()
+            .map(|(n, c)| (n.clone(), run_folder::sha256(c.as_ref())))
+            .collect()
+    }
+
+    /// Writes every staged file into `dir` (created if missing), beside
+    /// what is there (a saved spec): all to temporary names first, then all
+    /// renamed. On error, temporaries are removed.
     pub fn commit(self, dir: &Path) -> Result<Vec<PathBuf>, ExportError> {
         std::fs::create_dir_all(dir).map_err(|source| ExportError::Io {
             path: dir.to_owned(),
@@ -213,7 +237,7 @@ impl OutputSet {
 
 /// Writes `pieces`, in order, as the file `path`: a few vectored writes of
 /// up to 1024 pieces each.
-fn write_pieces(path: &Path, pieces: &[&[u8]]) -> std::io::Result<()> {
+pub(crate) fn write_pieces(path: &Path, pieces: &[&[u8]]) -> std::io::Result<()> {
     use std::io::{IoSlice, Write};
     const BATCH: usize = 1024;
     let mut file = std::fs::File::create(path)?;
