@@ -215,3 +215,31 @@ fn paths_tell_nothing_of_what_exists_outside() {
     assert!(missing.contains("inside the spec's folder"), "{missing}");
     std::fs::remove_file(outside).unwrap();
 }
+
+/// Idle sockets cannot hold the studio: 300 connections that send nothing
+/// (more than it serves at once) are closed after the header timeout, and
+/// a request then answers (1,100 of them made every request time out).
+#[test]
+fn idle_sockets_are_closed_and_the_studio_answers() {
+    use std::io::Read;
+    let studio = Studio::start("idle");
+    let idle: Vec<std::net::TcpStream> = (0..300)
+        .filter_map(|_| std::net::TcpStream::connect(("127.0.0.1", studio.port)).ok())
+        .collect();
+    assert!(
+        idle.len() > moirecast::studio::MAX_CONNECTIONS,
+        "{} connected",
+        idle.len()
+    );
+    std::thread::sleep(moirecast::studio::HEADER_TIMEOUT + std::time::Duration::from_secs(1));
+    let closed = idle
+        .into_iter()
+        .filter(|mut s| {
+            s.set_read_timeout(Some(std::time::Duration::from_secs(2)))
+                .unwrap();
+            matches!(s.read(&mut [0u8; 16]), Ok(0) | Err(_))
+        })
+        .count();
+    assert_eq!(closed, 300, "every idle socket is closed");
+    assert_eq!(studio.send("GET", "/api/state", &[], b"").status, 200);
+}

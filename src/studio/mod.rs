@@ -278,9 +278,46 @@ pub fn run(options: StudioOptions, announce: impl FnOnce(&str)) -> anyhow::Resul
         let listener = tokio::net::TcpListener::bind((options.host, options.port)).await?;
         let (router, url) = router(&options, listener.local_addr()?)?;
         announce(&url);
-        axum::serve(listener, router).await?;
+        serve(listener, router).await;
         Ok(())
     })
+}
+
+/// Most connections served at once; past it a new one is closed at once.
+pub const MAX_CONNECTIONS: usize = 256;
+/// A connection that does not send a whole request head within this time
+/// (waiting idle for its next request included) is closed.
+pub const HEADER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// Serves `router` on `listener` until the process ends: HTTP/1.1, at most
+/// [`MAX_CONNECTIONS`] at once, each closed after [`HEADER_TIMEOUT`]
+/// without a request head, so idle sockets cannot hold the server (1,100
+/// of them, with `ulimit -n 1024`, made every request time out). A failed
+/// accept (out of file descriptors) waits a moment and goes on.
+async fn serve(listener: tokio::net::TcpListener, router: Router) {
+    use hyper_util::rt::{TokioIo, TokioTimer};
+    let connections = Arc::new(tokio::sync::Semaphore::new(MAX_CONNECTIONS));
+    loop {
+        let stream = match listener.accept().await {
+            Ok((stream, _)) => stream,
+            Err(_) => {
+                tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+                continue;
+            }
+        };
+        let Ok(permit) = connections.clone().try_acquire_owned() else {
+            continue; // dropped: closed
+        };
+        let service = hyper_util::service::TowerToHyperService::new(router.clone());
+        tokio::spawn(async move {
+            let connection = hyper::server::conn::http1::Builder::new()
+                .timer(TokioTimer::new())
+                .header_read_timeout(HEADER_TIMEOUT)
+                .serve_connection(TokioIo::new(stream), service);
+            let _ = connection.await;
+            drop(permit);
+        });
+    }
 }
 
 /// The studio's routes for `options`, served at `addr`, and its URL.
