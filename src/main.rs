@@ -452,7 +452,7 @@ fn run(cli: Cli) -> Result<()> {
             host,
         } => {
             if !host.is_loopback() {
-                eprintln!("warning: --host {host} serves the studio beyond this machine: anyone who reaches it can edit the spec and write files into {}", out.display());
+                eprintln!("warning: --host {host} serves the studio beyond this machine: anyone who reaches it with the session token in the URL below can edit the spec and write files into {}; keep the URL to yourself", out.display());
             }
             moirecast::studio::run(
                 moirecast::studio::StudioOptions {

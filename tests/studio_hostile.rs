@@ -243,3 +243,63 @@ fn idle_sockets_are_closed_and_the_studio_answers() {
     assert_eq!(closed, 300, "every idle socket is closed");
     assert_eq!(studio.send("GET", "/api/state", &[], b"").status, 200);
 }
+
+/// Beyond loopback (`--host 0.0.0.0`) the studio answers any Host a remote
+/// browser sends (the loopback list refused a real one and let in a remote
+/// client that sent `Host: 127.0.0.1`), and only with the session token
+/// printed in its URL: the URL sets it as a same-site cookie.
+#[test]
+fn beyond_loopback_every_request_needs_the_session_token() {
+    let dir = scratch("studio-hostile", "token");
+    std::fs::write(dir.join("design.toml"), SMALL).unwrap();
+    let (sender, receiver) = std::sync::mpsc::channel();
+    let options = moirecast::studio::StudioOptions {
+        spec: Some(dir.join("design.toml")),
+        out: dir.join("out"),
+        host: "0.0.0.0".parse().unwrap(),
+        port: 0,
+    };
+    std::thread::spawn(move || {
+        moirecast::studio::run(options, |url| sender.send(url.to_string()).unwrap()).unwrap()
+    });
+    let url = receiver.recv().unwrap();
+    let (address, token) = url
+        .split_once("/?token=")
+        .expect("the URL carries the token");
+    assert_eq!(token.len(), 32, "{url}");
+    let port: u16 = address.rsplit(':').next().unwrap().parse().unwrap();
+    let get = |host: &str, target: &str, headers: &[(&str, &str)]| {
+        http::request_with(port, host, "GET", target, headers, b"")
+    };
+    for host in [format!("127.0.0.1:{port}"), format!("studio.lan:{port}")] {
+        assert_eq!(
+            get(&host, "/api/state", &[]).status,
+            403,
+            "{host} without the token"
+        );
+        let header = [("x-studio-token", token)];
+        assert_eq!(
+            get(&host, "/api/state", &header).status,
+            200,
+            "{host} with it"
+        );
+    }
+    let wrong = [("x-studio-token", "00000000000000000000000000000000")];
+    assert_eq!(get("studio.lan:1", "/api/state", &wrong).status, 403);
+    let printed = get(
+        &format!("studio.lan:{port}"),
+        &format!("/?token={token}"),
+        &[],
+    );
+    assert_eq!(printed.status, 303);
+    let cookie = printed.header("set-cookie").unwrap().to_string();
+    assert!(
+        cookie.contains("HttpOnly") && cookie.contains("SameSite=Strict"),
+        "{cookie}"
+    );
+    let pair = cookie.split(';').next().unwrap();
+    assert_eq!(
+        get(&format!("studio.lan:{port}"), "/", &[("cookie", pair)]).status,
+        200
+    );
+}

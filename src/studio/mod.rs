@@ -151,8 +151,12 @@ async fn blocking<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> 
 pub struct Studio {
     home: Home,
     out: PathBuf,
-    /// `Host` header values the server answers to.
-    hosts: Vec<String>,
+    /// `Host` header values the server answers to; `None`: any (it
+    /// listens on every address, and every request needs the token).
+    hosts: Option<Vec<String>>,
+    /// The session's token, for a listener beyond loopback: every request
+    /// carries it (cookie, `x-studio-token` header or `?token=`).
+    token: Option<String>,
     current: RwLock<Arc<Revision>>,
     revisions: AtomicU64,
     /// Progress and results of writes, as server-sent events.
@@ -340,19 +344,12 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
         None => (Home::Embedded, moirecast_spec::DEFAULT_SPEC.to_owned()),
     };
     let port = addr.port();
-    let mut hosts = vec![
-        format!("127.0.0.1:{port}"),
-        format!("localhost:{port}"),
-        format!("[::1]:{port}"),
-    ];
-    match addr.ip() {
-        IpAddr::V4(ip) => hosts.push(format!("{ip}:{port}")),
-        IpAddr::V6(ip) => hosts.push(format!("[{ip}]:{port}")),
-    }
+    let (hosts, token) = allowed_hosts(addr);
     let studio = Studio {
         home,
         out: options.out.clone(),
         hosts,
+        token: token.clone(),
         current: RwLock::new(Arc::new(Revision::new(
             0,
             String::new(),
@@ -377,7 +374,7 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
     let url = match addr.ip() {
         IpAddr::V6(ip) => format!("http://[{ip}]:{port}/"),
         IpAddr::V4(ip) => format!("http://{ip}:{port}/"),
-    };
+    } + &token.map(|t| format!("?token={t}")).unwrap_or_default();
     let router = Router::new()
         .route("/", get(page))
         .route("/studio.js", get(script))
@@ -404,9 +401,61 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
     Ok((router, url))
 }
 
+/// The `Host`s a studio listening at `addr` answers to, and its token. On
+/// loopback: the loopback names, no token. On one other address: that
+/// address, and a token. On every address (0.0.0.0, ::): any name a remote
+/// browser may use, and a token, which is then what keeps other sites out.
+fn allowed_hosts(addr: SocketAddr) -> (Option<Vec<String>>, Option<String>) {
+    let port = addr.port();
+    let named = |ip: IpAddr| match ip {
+        IpAddr::V4(ip) => format!("{ip}:{port}"),
+        IpAddr::V6(ip) => format!("[{ip}]:{port}"),
+    };
+    if addr.ip().is_loopback() {
+        let mut hosts = vec![
+            format!("127.0.0.1:{port}"),
+            format!("localhost:{port}"),
+            format!("[::1]:{port}"),
+        ];
+        hosts.push(named(addr.ip()));
+        return (Some(hosts), None);
+    }
+    let hosts = (!addr.ip().is_unspecified()).then(|| vec![named(addr.ip())]);
+    (hosts, Some(session_token()))
+}
+
+/// 128 random bits as hex, from the operating system.
+fn session_token() -> String {
+    let mut bytes = [0u8; 16];
+    getrandom::getrandom(&mut bytes).expect("the operating system's random numbers");
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Whether `request` carries the session's `token`: as the
+/// `moirecast_token` cookie (set by the printed URL), an `x-studio-token`
+/// header, or a `token` query parameter.
+fn carries_token(request: &Request, token: &str) -> bool {
+    let headers = request.headers();
+    let cookie = headers
+        .get_all(header::COOKIE)
+        .iter()
+        .filter_map(|c| c.to_str().ok())
+        .flat_map(|c| c.split(';'))
+        .any(|c| c.trim() == format!("moirecast_token={token}"));
+    let header = headers
+        .get("x-studio-token")
+        .is_some_and(|h| h.as_bytes() == token.as_bytes());
+    let query = request
+        .uri()
+        .query()
+        .is_some_and(|q| q.split('&').any(|p| p == format!("token={token}")));
+    cookie || header || query
+}
+
 /// Refuses requests whose `Host` is not an address this server answers
 /// at (a page on another site that rebinds its name to 127.0.0.1 sends its
-/// own name), and state-changing requests from another origin (browsers
+/// own name), those without the session's token where there is one, and
+/// state-changing requests from another origin (browsers
 /// send `Origin` on every cross-origin write, and `Sec-Fetch-Site`; local
 /// tools such as curl send neither). Every answer carries the page's
 /// Content-Security-Policy and refuses to be framed.
@@ -422,15 +471,38 @@ async fn loopback_only(
             .map(|h| h.to_str().unwrap_or("(not text)").to_string())
     };
     let host = text(header::HOST).unwrap_or_default();
-    let mut response = if !studio.hosts.contains(&host) {
+    let known = studio
+        .hosts
+        .as_ref()
+        .is_none_or(|hosts| hosts.contains(&host));
+    let token = studio.token.as_deref();
+    let printed_url = request.uri().query().is_some_and(|q| q.contains("token="));
+    let mut response = if !known {
         error(
             StatusCode::FORBIDDEN,
             format!(
                 "Host `{host}` is not this studio's address ({})",
-                studio.hosts[0]
+                studio.hosts.as_ref().map_or("", |h| h[0].as_str())
             ),
         )
-    } else if let Some(why) = cross_site_write(&studio, &request) {
+    } else if token.is_some_and(|t| !carries_token(&request, t)) {
+        error(
+            StatusCode::FORBIDDEN,
+            "this studio serves beyond this machine and needs its session token: open the URL it printed (with ?token=…)",
+        )
+    } else if let (Some(t), true, "/") = (token, printed_url, request.uri().path()) {
+        // the printed URL: keep the token in a cookie of this site only,
+        // and go on to the page without it in the address bar
+        let mut to_page = StatusCode::SEE_OTHER.into_response();
+        let headers = to_page.headers_mut();
+        headers.insert(header::LOCATION, HeaderValue::from_static("/"));
+        let cookie = format!("moirecast_token={t}; Path=/; HttpOnly; SameSite=Strict");
+        headers.insert(
+            header::SET_COOKIE,
+            HeaderValue::from_str(&cookie).expect("hex"),
+        );
+        to_page
+    } else if let Some(why) = cross_site_write(&request) {
         error(StatusCode::FORBIDDEN, why)
     } else {
         next.run(request).await
@@ -455,7 +527,7 @@ async fn loopback_only(
 /// Why a request that changes state comes from another site, if it does:
 /// an `Origin` other than the studio's own, or a `Sec-Fetch-Site` other
 /// than `same-origin` or `none` (typed into the address bar).
-fn cross_site_write(studio: &Studio, request: &Request) -> Option<String> {
+fn cross_site_write(request: &Request) -> Option<String> {
     use axum::http::Method;
     if matches!(
         *request.method(),
@@ -466,7 +538,13 @@ fn cross_site_write(studio: &Studio, request: &Request) -> Option<String> {
     let headers = request.headers();
     if let Some(origin) = headers.get(header::ORIGIN) {
         let origin = origin.to_str().unwrap_or("(not text)");
-        let ours = studio.hosts.iter().any(|h| origin == format!("http://{h}"));
+        // same origin: the page was served by the host this request names
+        // (the Host itself was checked against the allowed ones)
+        let host = headers
+            .get(header::HOST)
+            .and_then(|h| h.to_str().ok())
+            .unwrap_or("");
+        let ours = origin == format!("http://{host}");
         if !ours {
             return Some(format!(
                 "a {} from origin `{origin}` is refused: only the studio's own page may change the design or write files",
