@@ -17,6 +17,7 @@ import hashlib
 import json
 import pathlib
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -104,6 +105,7 @@ def main():
     subprocess.run([binary, "device", str(specs[0]), "-o", str(out), "-q"], check=True)
     assert not strays(out), strays(out)
     check_folder(out)
+    shutil.rmtree(work)
     print(json.dumps({"runs": runs, **counts}))
 
 
