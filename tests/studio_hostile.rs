@@ -303,3 +303,36 @@ fn beyond_loopback_every_request_needs_the_session_token() {
         200
     );
 }
+
+/// A frame past its budget of rays is refused at once (1024 px at 64
+/// phases through the mesh held the only frame worker for 13 minutes), and
+/// frames whose clients hang up leave the worker to answer the next
+/// (`render_traced_while` stops them: its own test).
+#[test]
+fn frames_have_a_budget_and_hung_up_frames_leave_the_worker() {
+    use std::io::Write;
+    let studio = Studio::start("frames");
+    let r = studio.send(
+        "GET",
+        "/api/frame.png?size=1024&samples=8&along=30&tilt=30",
+        &[],
+        b"",
+    );
+    assert_eq!(r.status, 400, "{}", String::from_utf8_lossy(&r.body));
+    assert!(String::from_utf8_lossy(&r.body).contains("budget"));
+    // within the budget but slow: through the mesh, 1024 px at 4 phases
+    let slow = "/api/frame.png?size=1024&samples=2&along=20&tilt=10";
+    for _ in 0..3 {
+        let mut hung = std::net::TcpStream::connect(("127.0.0.1", studio.port)).unwrap();
+        write!(
+            hung,
+            "GET {slow} HTTP/1.1\r\nHost: {}\r\n\r\n",
+            studio.host()
+        )
+        .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        drop(hung); // the client goes away
+    }
+    let r = studio.send("GET", "/api/frame.png?size=64&samples=2&tilt=0", &[], b"");
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+}

@@ -10,13 +10,16 @@ use crate::render::{png, LightsChoice, Tracer};
 use moirecast_kernel::mesher::DeviceMesh;
 use moirecast_kernel::progress::Silent;
 use moirecast_kernel::BaseKind;
-use moirecast_render::frame::{render_traced, traced_mesh, Camera, Integrator, Sampling, View};
+use moirecast_render::frame::{
+    render_traced_while, traced_mesh, Camera, Integrator, Sampling, View,
+};
 use moirecast_render::section::Sections;
 use moirecast_render::sheet::to_rgb8;
 use moirecast_render::Scene;
 use moirecast_spec::Spec;
 use std::cell::OnceCell;
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc;
 use std::sync::Arc;
 use tokio::sync::oneshot;
@@ -27,6 +30,14 @@ pub const MAX_TILT_DEG: f64 = 45.0;
 pub const SIZES: (usize, usize) = (16, 1024);
 /// Lens phases per pixel, N²: N in this range.
 pub const SAMPLES: (usize, usize) = (1, 8);
+/// Most rays a frame may trace through the exact sections: a 1024 px
+/// frame at 16 lens phases (the page's frames: 256 px at 9 or 16).
+pub const SECTION_RAYS: usize = 1024 * 1024 * 16;
+/// Most rays a frame may trace through the mesh (a tilt along, a printed
+/// device), each several times a section ray's cost: four times the
+/// page's 256 px at 16 phases. 1024 px at 64 phases, through the mesh at
+/// a 30° tilt along, held the only frame worker for over 13 minutes.
+pub const MESH_RAYS: usize = 4 * 256 * 256 * 16;
 
 /// What a frame shows.
 pub struct FrameRequest {
@@ -64,6 +75,34 @@ impl FrameRequest {
         }
         Ok(())
     }
+
+    /// Refuses a frame past its budget of rays: [`SECTION_RAYS`] through
+    /// a dual-lens device's sections, [`MESH_RAYS`] through the mesh.
+    pub fn within_budget(&self, design: &moirecast_kernel::Design) -> Result<(), String> {
+        let rays = self.size * self.size * self.samples * self.samples;
+        let (budget, through) = if by_sections(design, self.along_deg) {
+            (SECTION_RAYS, "the exact sections")
+        } else {
+            (MESH_RAYS, "the mesh")
+        };
+        if rays > budget {
+            return Err(format!(
+                "size={} with samples={} traces {rays} rays through {through}, more than a frame's budget of {budget}: use a smaller size or fewer samples",
+                self.size, self.samples
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Whether a frame `along_deg` about x from the design view is traced
+/// through a dual-lens device's exact sections (an orthographic view
+/// tilted about the lens axis only), not through its mesh.
+pub fn by_sections(design: &moirecast_kernel::Design, along_deg: f64) -> bool {
+    let view = &design.params.view;
+    design.params.base.kind == BaseKind::DualLens
+        && view.tilt_along + along_deg.to_radians() == 0.0
+        && view.distance.is_none()
 }
 
 /// A rendered frame and its scores.
@@ -84,6 +123,9 @@ pub enum FrameReply {
 }
 
 struct FrameJob {
+    /// The request's number: a job whose number is not the latest was
+    /// overtaken.
+    number: u64,
     request: FrameRequest,
     reply: oneshot::Sender<FrameReply>,
 }
@@ -91,22 +133,33 @@ struct FrameJob {
 /// The frame worker of one revision; it ends when this is dropped.
 pub struct Frames {
     jobs: mpsc::Sender<FrameJob>,
+    /// The number of the latest request.
+    latest: Arc<AtomicU64>,
 }
 
 impl Frames {
     pub fn start(spec: Arc<Spec>) -> Frames {
         let (jobs, queue) = mpsc::channel();
+        let latest = Arc::new(AtomicU64::new(0));
+        let newest = latest.clone();
         std::thread::Builder::new()
             .name("studio-frames".into())
-            .spawn(move || work(&spec, queue))
+            .spawn(move || work(&spec, queue, &newest))
             .expect("a thread for frames");
-        Frames { jobs }
+        Frames { jobs, latest }
     }
 
-    /// Renders `request`, or answers that a newer one overtook it.
+    /// Renders `request`, or answers that a newer one overtook it (while it
+    /// waited, or while it was traced: then it stops).
     pub async fn render(&self, request: FrameRequest) -> FrameReply {
         let (reply, answer) = oneshot::channel();
-        if self.jobs.send(FrameJob { request, reply }).is_err() {
+        let number = self.latest.fetch_add(1, Ordering::SeqCst) + 1;
+        let job = FrameJob {
+            number,
+            request,
+            reply,
+        };
+        if self.jobs.send(job).is_err() {
             return FrameReply::Failed("error: the frame worker stopped".into());
         }
         answer
@@ -115,12 +168,90 @@ impl Frames {
     }
 }
 
-/// Serves frame jobs until every sender is gone, newest first.
-fn work(spec: &Spec, queue: mpsc::Receiver<FrameJob>) {
+/// The device's mesh, its traced bodies and their BVH, each built once
+/// on first need by a worker (locals of [`work`], which they borrow).
+type MeshCell = OnceCell<Result<DeviceMesh, String>>;
+type BodiesCell<'m> =
+    OnceCell<Result<(std::borrow::Cow<'m, moirecast_kernel::Mesh>, Vec<bool>), String>>;
+
+/// The mesh's scene (built once into the cells), or the error in the
+/// command line's words.
+fn mesh_scene<'m>(
+    spec: &Spec,
+    mesh: &'m MeshCell,
+    bodies: &'m BodiesCell<'m>,
+    scene: &'m OnceCell<Scene<'m>>,
+) -> Result<&'m Scene<'m>, String> {
+    let dm = mesh
+        .get_or_init(|| {
+            crate::mesh_spec(spec, &Silent)
+                .map_err(|e| format!("error: {:#}", anyhow::Error::from(e)))
+        })
+        .as_ref()
+        .map_err(Clone::clone)?;
+    let (traced, absorbing) = bodies
+        .get_or_init(|| {
+            traced_mesh(&spec.design, dm)
+                .map_err(|e| format!("error: building the traced bodies: {e}"))
+        })
+        .as_ref()
+        .map_err(Clone::clone)?;
+    Ok(scene.get_or_init(|| Scene::with_absorbing(traced, absorbing.clone())))
+}
+
+/// The view of `request`: its tilts count from the design view, tilt 0
+/// being the view the base is compensated for.
+fn view_of(
+    design: &moirecast_kernel::Design,
+    r: &FrameRequest,
+    lighting: moirecast_render::frame::Lighting,
+) -> View {
+    let design_view = &design.params.view;
+    View {
+        width: r.size,
+        height: r.size,
+        sampling: Sampling::LensPeriod(r.samples * r.samples),
+        tilt_across: design_view.tilt + r.tilt_deg.to_radians(),
+        tilt_along: design_view.tilt_along + r.along_deg.to_radians(),
+        camera: design_view
+            .distance
+            .map_or(Camera::Orthographic, |distance| Camera::Perspective {
+                distance,
+            }),
+        lighting,
+        integrator: Integrator::default(),
+        seed: 1,
+    }
+}
+
+/// The frame's PNG and its three scores, side by side.
+fn encoded(frame: &moirecast_render::frame::Frame, started: std::time::Instant) -> FrameReply {
+    let (encoded, (fidelity, (local_fidelity, contrast))) = rayon::join(
+        || png(&to_rgb8(frame.width, frame.height, &frame.rgb)),
+        || {
+            rayon::join(
+                || frame.fidelity(),
+                || rayon::join(|| frame.local_fidelity(), || frame.level_line_contrast()),
+            )
+        },
+    );
+    match encoded {
+        Err(e) => FrameReply::Failed(format!("error: encoding the frame: {e:#}")),
+        Ok(bytes) => FrameReply::Done(FrameImage {
+            png: bytes,
+            fidelity,
+            local_fidelity,
+            contrast,
+            milliseconds: started.elapsed().as_secs_f64() * 1e3,
+        }),
+    }
+}
+
+/// Serves frame jobs until every sender is gone, newest first. A frame
+/// stops as soon as its client goes away or a newer request arrives.
+fn work(spec: &Spec, queue: mpsc::Receiver<FrameJob>, latest: &AtomicU64) {
     let design = &spec.design;
-    let mesh: OnceCell<Result<DeviceMesh, String>> = OnceCell::new();
-    let traced = OnceCell::new();
-    let scene = OnceCell::new();
+    let (mesh, bodies, scene) = (OnceCell::new(), OnceCell::new(), OnceCell::new());
     let mut sections: HashMap<usize, Option<Sections>> = HashMap::new();
     while let Ok(mut job) = queue.recv() {
         while let Ok(newer) = queue.try_recv() {
@@ -139,95 +270,32 @@ fn work(spec: &Spec, queue: mpsc::Receiver<FrameJob>) {
                 continue;
             }
         };
-        // the sliders tilt from the design view: tilt 0 is the view the
-        // base is compensated for
-        let design_view = &design.params.view;
-        let view = View {
-            width: r.size,
-            height: r.size,
-            sampling: Sampling::LensPeriod(r.samples * r.samples),
-            tilt_across: design_view.tilt + r.tilt_deg.to_radians(),
-            tilt_along: design_view.tilt_along + r.along_deg.to_radians(),
-            camera: design_view
-                .distance
-                .map_or(Camera::Orthographic, |distance| Camera::Perspective {
-                    distance,
-                }),
-            lighting,
-            integrator: Integrator::default(),
-            seed: 1,
-        };
-        let dual_lens = design.params.base.kind == BaseKind::DualLens;
-        let by_sections =
-            dual_lens && view.tilt_along == 0.0 && view.camera == Camera::Orthographic;
-        let section_set = if by_sections {
-            sections
-                .entry(r.size)
-                .or_insert_with(|| Tracer::Sections.sections(design, r.size))
-                .as_ref()
-        } else {
-            None
-        };
-        // A frame the sections trace whole needs no mesh.
-        let frame = match section_set.and_then(|s| s.bounds()) {
-            Some(bounds) => Ok(render_traced(
+        let view = view_of(design, r, lighting);
+        let keep_going = || !job.reply.is_closed() && latest.load(Ordering::SeqCst) == job.number;
+        let through = by_sections(design, r.along_deg)
+            .then(|| {
+                sections
+                    .entry(r.size)
+                    .or_insert_with(|| Tracer::Sections.sections(design, r.size))
+                    .as_ref()
+            })
+            .flatten();
+        // a frame the sections trace whole needs no mesh
+        let frame = match through.and_then(|s| s.bounds()) {
+            Some(bounds) => Ok(render_traced_while(
                 design,
                 &Scene::framing(bounds),
-                section_set,
+                through,
                 view,
+                &keep_going,
             )),
-            None => {
-                let mesh_scene = mesh
-                    .get_or_init(|| {
-                        crate::mesh_spec(spec, &Silent)
-                            .map_err(|e| format!("error: {:#}", anyhow::Error::from(e)))
-                    })
-                    .as_ref()
-                    .map_err(Clone::clone)
-                    .and_then(|dm| {
-                        traced
-                            .get_or_init(|| {
-                                traced_mesh(design, dm)
-                                    .map_err(|e| format!("error: building the traced bodies: {e}"))
-                            })
-                            .as_ref()
-                            .map_err(Clone::clone)
-                    })
-                    .map(|(m, absorbing)| {
-                        scene.get_or_init(|| Scene::with_absorbing(m, absorbing.clone()))
-                    });
-                mesh_scene.map(|scene| render_traced(design, scene, section_set, view))
-            }
+            None => mesh_scene(spec, &mesh, &bodies, &scene)
+                .map(|scene| render_traced_while(design, scene, through, view, &keep_going)),
         };
         let reply = match frame {
             Err(e) => FrameReply::Failed(e),
-            Ok(frame) => {
-                // the image and its three scores, side by side
-                let (encoded, (fidelity, (local_fidelity, contrast))) = rayon::join(
-                    || png(&to_rgb8(frame.width, frame.height, &frame.rgb)),
-                    || {
-                        rayon::join(
-                            || frame.fidelity(),
-                            || {
-                                rayon::join(
-                                    || frame.local_fidelity(),
-                                    || frame.level_line_contrast(),
-                                )
-                            },
-                        )
-                    },
-                );
-                match encoded {
-                    Err(e) => FrameReply::Failed(format!("error: encoding the frame: {e:#}")),
-                    Ok(bytes) => FrameReply::Done(FrameImage {
-                        png: bytes,
-                        fidelity,
-                        local_fidelity,
-                        contrast,
-                        milliseconds: started.elapsed().as_secs_f64() * 1e3,
-                    }),
-                }
-            }
+            Ok(None) => FrameReply::Superseded,
+            Ok(Some(frame)) => encoded(&frame, started),
         };
         let _ = job.reply.send(reply);
     }

@@ -738,10 +738,13 @@ async fn frame(State(studio): State<Arc<Studio>>, Query(q): Query<FrameQuery>) -
         samples: q.samples,
         lights,
     };
-    if let Err(e) = request.validate() {
+    let rev = studio.current();
+    if let Err(e) = request
+        .validate()
+        .and_then(|()| request.within_budget(&rev.spec.design))
+    {
         return error(StatusCode::BAD_REQUEST, e);
     }
-    let rev = studio.current();
     match rev.frames.render(request).await {
         FrameReply::Done(f) => {
             let mut response = bytes("image/png", f.png);

@@ -900,6 +900,19 @@ pub fn render_traced(
     sections: Option<&Sections>,
     view: View,
 ) -> Frame {
+    render_traced_while(design, scene, sections, view, &|| true).expect("never stopped")
+}
+
+/// [`render_traced`], stopped (`None`) as soon as `keep_going` says so: it
+/// is asked before every pixel the frame traces (the studio stops a frame
+/// whose client went away, or that a newer request overtook).
+pub fn render_traced_while(
+    design: &Design,
+    scene: &Scene,
+    sections: Option<&Sections>,
+    view: View,
+    keep_going: &(dyn Fn() -> bool + Sync),
+) -> Option<Frame> {
     let shot = Shot::new(scene, &view, design.view_pivot());
     let (levels, lighting) = (design.params.base.levels, view.lighting);
     let (width, height) = (view.width, view.height);
@@ -1016,8 +1029,19 @@ pub fn render_traced(
             }
         }
     };
-    let (rgb, phase, dropped) = paint(width, height, &pixel_of);
-    Frame {
+    let stopped = std::sync::atomic::AtomicBool::new(false);
+    let pixel_while = |px: usize, py: usize| {
+        if stopped.load(std::sync::atomic::Ordering::Relaxed) || !keep_going() {
+            stopped.store(true, std::sync::atomic::Ordering::Relaxed);
+            return (DVec3::ZERO, f64::NAN, 0.0);
+        }
+        pixel_of(px, py)
+    };
+    let (rgb, phase, dropped) = paint(width, height, &pixel_while);
+    if stopped.into_inner() {
+        return None;
+    }
+    Some(Frame {
         width,
         height,
         signal: rgb.iter().map(|&c| lighting.signal(c)).collect(),
@@ -1025,7 +1049,7 @@ pub fn render_traced(
         phase,
         period_px: design.params.period / shot.pixel,
         dropped_weight: dropped.iter().sum::<f64>() / dropped.len().max(1) as f64,
-    }
+    })
 }
 
 /// The sections a view lets the branching integrator trace, and its

@@ -286,3 +286,39 @@ fn the_level_lines_take_the_colours_of_the_lateral_lights() {
         assert!((sum - k * both).length() < 1e-12 && (0.0..=1.0 + 1e-12).contains(&k));
     }
 }
+
+/// A frame stops once `keep_going` says so (the studio stops one whose
+/// client went away): `None`, after asking no more than the pixels it
+/// traced; and with `keep_going` always true it is `render_traced`'s frame.
+#[test]
+fn a_frame_stops_when_told() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let device = rings(1.0, None);
+    let dm = mesh_device(&device, &Silent).unwrap();
+    let (mesh, absorbing) = traced_mesh(&device, &dm).unwrap();
+    let scene = Scene::with_absorbing(&mesh, absorbing);
+    let view = View {
+        width: 64,
+        height: 64,
+        sampling: Sampling::default(),
+        tilt_across: 0.0,
+        tilt_along: 5f64.to_radians(), // through the mesh
+        camera: Camera::Orthographic,
+        lighting: Lighting::default_for(&device),
+        integrator: Integrator::default(),
+        seed: 1,
+    };
+    let asked = AtomicUsize::new(0);
+    let stopped =
+        moirecast_render::frame::render_traced_while(&device, &scene, None, view, &|| {
+            asked.fetch_add(1, Ordering::Relaxed) < 100
+        });
+    assert!(stopped.is_none());
+    assert!(
+        asked.load(Ordering::Relaxed) < 64 * 64,
+        "it stopped asking once told"
+    );
+    let whole = moirecast_render::frame::render_traced_while(&device, &scene, None, view, &|| true)
+        .expect("not stopped");
+    assert_eq!(whole.rgb, render_traced(&device, &scene, None, view).rgb);
+}
