@@ -336,3 +336,51 @@ fn frames_have_a_budget_and_hung_up_frames_leave_the_worker() {
     let r = studio.send("GET", "/api/frame.png?size=64&samples=2&tilt=0", &[], b"");
     assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
 }
+
+/// A body declared past the limit is refused at once (a Content-Length of
+/// 100 MB kept the handler waiting), a body cut short ends its request,
+/// and event streams past their number are refused instead of holding
+/// connections.
+#[test]
+fn bodies_and_event_streams_cannot_hold_the_studio() {
+    use std::io::{Read, Write};
+    let studio = Studio::start("bodies");
+    let raw = |head: &str, shut: bool| {
+        let mut s = std::net::TcpStream::connect(("127.0.0.1", studio.port)).unwrap();
+        s.write_all(head.as_bytes()).unwrap();
+        if shut {
+            s.shutdown(std::net::Shutdown::Write).unwrap();
+        }
+        let mut reply = String::new();
+        let _ = s.read_to_string(&mut reply);
+        reply
+    };
+    let huge = format!("PUT /api/spec HTTP/1.1\r\nHost: {}\r\nContent-Length: 99999999\r\nConnection: close\r\n\r\n[layout]\n", studio.host());
+    let reply = raw(&huge, false);
+    assert!(reply.starts_with("HTTP/1.1 413"), "{reply}");
+    // declared 500 bytes, sent 9, then the client's side closes
+    let short = format!(
+        "PUT /api/spec HTTP/1.1\r\nHost: {}\r\nContent-Length: 500\r\n\r\n[layout]\n",
+        studio.host()
+    );
+    let reply = raw(&short, true);
+    assert!(reply.starts_with("HTTP/1.1 4"), "{reply}");
+    let streams: Vec<std::net::TcpStream> = (0..moirecast::studio::MAX_EVENT_STREAMS)
+        .map(|_| {
+            let mut s = std::net::TcpStream::connect(("127.0.0.1", studio.port)).unwrap();
+            write!(
+                s,
+                "GET /api/events HTTP/1.1\r\nHost: {}\r\n\r\n",
+                studio.host()
+            )
+            .unwrap();
+            let mut head = [0u8; 12];
+            s.read_exact(&mut head).unwrap();
+            assert_eq!(&head, b"HTTP/1.1 200");
+            s
+        })
+        .collect();
+    assert_eq!(studio.send("GET", "/api/events", &[], b"").status, 503);
+    drop(streams);
+    assert_eq!(studio.send("GET", "/api/state", &[], b"").status, 200);
+}

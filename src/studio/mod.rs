@@ -161,6 +161,8 @@ pub struct Studio {
     revisions: AtomicU64,
     /// Progress and results of writes, as server-sent events.
     events: broadcast::Sender<String>,
+    /// Permits for event streams ([`MAX_EVENT_STREAMS`]).
+    streams: Arc<tokio::sync::Semaphore>,
     writing: AtomicBool,
 }
 
@@ -317,6 +319,8 @@ async fn serve(listener: tokio::net::TcpListener, router: Router) {
             let connection = hyper::server::conn::http1::Builder::new()
                 .timer(TokioTimer::new())
                 .header_read_timeout(HEADER_TIMEOUT)
+                // a client may close its side once its request is sent
+                .half_close(true)
                 .serve_connection(TokioIo::new(stream), service);
             let _ = connection.await;
             drop(permit);
@@ -357,6 +361,7 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
         ))),
         revisions: AtomicU64::new(1),
         events: broadcast::channel(1024).0,
+        streams: Arc::new(tokio::sync::Semaphore::new(MAX_EVENT_STREAMS)),
         writing: AtomicBool::new(false),
     };
     // the spec given must itself be valid: a studio opens on a design
@@ -505,7 +510,10 @@ async fn loopback_only(
     } else if let Some(why) = cross_site_write(&request) {
         error(StatusCode::FORBIDDEN, why)
     } else {
-        next.run(request).await
+        match whole_body(request).await {
+            Ok(request) => next.run(request).await,
+            Err(refused) => refused,
+        }
     };
     let safety = response.headers_mut();
     safety.insert(
@@ -522,6 +530,42 @@ async fn loopback_only(
         HeaderValue::from_static("no-referrer"),
     );
     response
+}
+
+/// How long a request's body may take to arrive.
+pub const BODY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// `request` with its body read whole, within [`MAX_BODY_BYTES`] and
+/// [`BODY_TIMEOUT`]: a body declared or sent larger is refused with 413 at
+/// once (a Content-Length of 100 MB kept the handler waiting for it), and
+/// one that stalls with 408, so no client holds a handler.
+async fn whole_body(request: Request) -> Result<Request, Response> {
+    let declared = request
+        .headers()
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    if declared.is_some_and(|n| n > MAX_BODY_BYTES as u64) {
+        return Err(error(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!("a body of at most {MAX_BODY_BYTES} bytes"),
+        ));
+    }
+    let (parts, body) = request.into_parts();
+    match tokio::time::timeout(BODY_TIMEOUT, axum::body::to_bytes(body, MAX_BODY_BYTES)).await {
+        Ok(Ok(bytes)) => Ok(Request::from_parts(parts, Body::from(bytes))),
+        Ok(Err(_)) => Err(error(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!("a body of at most {MAX_BODY_BYTES} bytes, whole"),
+        )),
+        Err(_) => Err(error(
+            StatusCode::REQUEST_TIMEOUT,
+            format!(
+                "the body did not arrive within {} s",
+                BODY_TIMEOUT.as_secs()
+            ),
+        )),
+    }
 }
 
 /// Why a request that changes state comes from another site, if it does:
@@ -938,15 +982,23 @@ async fn write(State(studio): State<Arc<Studio>>, Query(q): Query<WriteQuery>) -
 
 /// Server-sent events: one JSON object per event (`start`, `stage`,
 /// `tick`, `done`, `error`).
-async fn events(State(studio): State<Arc<Studio>>) -> impl IntoResponse {
+async fn events(State(studio): State<Arc<Studio>>) -> Response {
+    // a stream holds its permit until it ends, which for a client gone
+    // away is the next keep-alive that finds the socket closed
+    let Ok(permit) = studio.streams.clone().try_acquire_owned() else {
+        return error(
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!("at most {MAX_EVENT_STREAMS} event streams at once"),
+        );
+    };
     let receiver = studio.events.subscribe();
-    let stream = futures_util::stream::unfold(receiver, |mut rx| async move {
+    let stream = futures_util::stream::unfold((receiver, permit), |(mut rx, permit)| async move {
         loop {
             match rx.recv().await {
                 Ok(message) => {
                     return Some((
                         Ok::<_, std::convert::Infallible>(Event::default().data(message)),
-                        rx,
+                        (rx, permit),
                     ))
                 }
                 Err(broadcast::error::RecvError::Lagged(_)) => continue,
@@ -956,5 +1008,12 @@ async fn events(State(studio): State<Arc<Studio>>) -> impl IntoResponse {
     });
     let mut headers = HeaderMap::new();
     headers.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
-    (headers, Sse::new(stream).keep_alive(KeepAlive::default()))
+    let keep_alive = KeepAlive::default().interval(EVENTS_KEEP_ALIVE);
+    (headers, Sse::new(stream).keep_alive(keep_alive)).into_response()
 }
+
+/// Most event streams at once (the page opens one).
+pub const MAX_EVENT_STREAMS: usize = 16;
+/// How often an idle event stream writes a comment: a client gone away is
+/// found, and its stream and connection ended, within this.
+pub const EVENTS_KEEP_ALIVE: std::time::Duration = std::time::Duration::from_secs(2);
