@@ -247,6 +247,9 @@ pub fn explore_grid(
     };
     // One cell: its scores and its best frame, labelled.
     let explore_cell = |ratio: f64, a: f64| -> Result<(Cell, (Rgb8, String))> {
+        if progress.cancelled() {
+            anyhow::bail!("cancelled: the grid was no longer wanted");
+        }
         let mut params = base.params.clone();
         params.base.a = a;
         params.base.d = Some(ratio * ds);

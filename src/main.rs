@@ -97,6 +97,10 @@ enum Command {
         /// use the page, and write files here: a warning says so.
         #[arg(long, default_value = "127.0.0.1")]
         host: std::net::IpAddr,
+        /// Build designs over the budget (about 4 GB at a mold run's peak):
+        /// without it the studio refuses them, naming the estimate.
+        #[arg(long)]
+        allow_large: bool,
     },
     /// Build the device and its two-piece casting mold: DIR/mold-top.stl and
     /// DIR/mold-bottom.stl, the same halves as exact B-reps DIR/mold-top.step
@@ -232,8 +236,9 @@ struct RunArgs {
     /// Print how long each stage took.
     #[arg(short, long)]
     verbose: bool,
-    /// Build designs over the mesh budget (20 M triangles, about 8 GB):
-    /// without it they are refused with the estimate before any meshing.
+    /// Build designs over the run budget (about 4 GB at a mold run's peak,
+    /// and a survey of 64 M cells): without it they are refused with the
+    /// estimate before any meshing.
     #[arg(long)]
     allow_large: bool,
 }
@@ -450,6 +455,7 @@ fn run(cli: Cli) -> Result<()> {
             out,
             port,
             host,
+            allow_large,
         } => {
             if !host.is_loopback() {
                 eprintln!("warning: --host {host} serves the studio beyond this machine: anyone who reaches it with the session token in the URL below can edit the spec and write files into {}; keep the URL to yourself", out.display());
@@ -460,6 +466,7 @@ fn run(cli: Cli) -> Result<()> {
                     out,
                     host,
                     port,
+                    allow_large,
                 },
                 |url| {
                     use std::io::Write;

@@ -105,6 +105,8 @@ pub struct MeshReport {
     pub base_columns: [usize; 2],
     /// Triangles a uniform grid would need for the same tolerance.
     pub uniform_triangles: usize,
+    /// The budget's estimate, before meshing, of a mold run's peak memory.
+    pub estimated_mold_peak_mb: f64,
 }
 
 /// Revealer lens geometry measured from the mesh.
@@ -371,6 +373,7 @@ pub fn device_report(
             revealer_columns: [st.revealer_columns.0, st.revealer_columns.1],
             base_columns: [st.base_columns.0, st.base_columns.1],
             uniform_triangles: st.uniform_triangles,
+            estimated_mold_peak_mb: (st.estimated_peak_bytes / 1e6).round(),
         },
         lenses: LensReport {
             arcs_measured: ls.arcs,

@@ -85,12 +85,13 @@ fn a_small_design_builds_with_a_full_report() {
             "missing check {name}"
         );
     }
-    // no temporary files left
+    // no temporary files left: the three and the run's manifest
     let names: Vec<String> = std::fs::read_dir(&out)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
-    assert_eq!(names.len(), 3, "{names:?}");
+    assert_eq!(names.len(), 4, "{names:?}");
+    assert!(names.iter().any(|n| n == ".moirecast-run"), "{names:?}");
     // the B-rep: every lens a face, the walls, and a STEP file of that size
     let brep = &report["brep"];
     assert_eq!(brep["revealer_faces"], 8);
@@ -121,6 +122,7 @@ fn a_printed_design_writes_two_bodies_a_3mf_and_their_step_files() {
     assert_eq!(
         names,
         [
+            ".moirecast-run",
             "device-black.step",
             "device-black.stl",
             "device-clear.step",
@@ -268,6 +270,32 @@ fn a_run_replaces_the_last_one_and_leaves_other_files_alone() {
     );
 }
 
+/// A design past the run budget (issue 44: 20,000 lenses over a metre
+/// grew past 24 GB) is refused before its survey, naming the rule and
+/// `--allow-large`; one whose survey fits but whose estimate does not is
+/// refused after it, at `mesh.tolerance`, with the estimate.
+#[test]
+fn a_design_past_the_budget_is_refused_before_it_is_built() {
+    let dir = scratch("budget");
+    let huge =
+        "[surface]\nkind = \"plane\"\n[layout]\nwidth = 1000.0\nheight = 1000.0\nperiod = 0.05\n";
+    let (ok, err, out) = run(huge, &dir);
+    assert!(
+        !ok && err.contains("`layout.width`") && err.contains("--allow-large"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    let fine = "[surface]\nkind = \"saddle\"\nradius = 400.0\n[layout]\nwidth = 200.0\nheight = 200.0\nperiod = 0.5\n[mesh]\ntolerance = 0.0002\n";
+    let (ok, err, out) = run(fine, &dir);
+    assert!(
+        !ok && err.contains("`mesh.tolerance`")
+            && err.contains("GB")
+            && err.contains("--allow-large"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
 /// A layout a kilometre wide with an image is refused for its width (it
 /// blamed the image: "the shape is empty").
 #[test]
@@ -407,7 +435,8 @@ fn render_writes_frames_sheet_gif_and_fidelity_deterministically() {
         );
         assert!(x == y, "{f} differs between runs");
     }
-    assert_eq!(std::fs::read_dir(&out_a).unwrap().count(), names.len());
+    // and the run's manifest
+    assert_eq!(std::fs::read_dir(&out_a).unwrap().count(), names.len() + 1);
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out_a.join("report.json")).unwrap()).unwrap();
     let frames = report["frames"].as_array().unwrap();

@@ -28,9 +28,10 @@ use std::time::{Duration, Instant};
 
 /// Cases per run in CI.
 const CASES: usize = 160;
-/// Triangles a fuzzed design may have: larger draws are refused by the mesh
-/// budget rule, which keeps a case under a second.
-const BUDGET_TRIANGLES: u64 = 150_000;
+/// Bytes a fuzzed design's mold run may hold (about 150,000 triangles):
+/// larger draws are refused by the budget rule, which keeps a case under a
+/// second.
+const BUDGET_BYTES: f64 = 120e6;
 /// The seed of the test command's cases.
 const FIXED_SEED: u64 = 7;
 /// A case running longer than this is a hang.
@@ -357,7 +358,8 @@ fn run_case(text: &str, with_mold: bool, out: &Path) -> Outcome {
         Err(e) => return Outcome::Bug(format!("the drawn spec does not parse: {e}")),
     };
     spec.design.mesh_budget = MeshBudget {
-        max_triangles: Some(BUDGET_TRIANGLES),
+        max_bytes: Some(BUDGET_BYTES),
+        ..MeshBudget::DEFAULT
     };
     let device = moirecast::run_device(
         &spec,

@@ -258,6 +258,7 @@ fn beyond_loopback_every_request_needs_the_session_token() {
         out: dir.join("out"),
         host: "0.0.0.0".parse().unwrap(),
         port: 0,
+        allow_large: false,
     };
     std::thread::spawn(move || {
         moirecast::studio::run(options, |url| sender.send(url.to_string()).unwrap()).unwrap()
@@ -382,5 +383,24 @@ fn bodies_and_event_streams_cannot_hold_the_studio() {
         .collect();
     assert_eq!(studio.send("GET", "/api/events", &[], b"").status, 503);
     drop(streams);
+    assert_eq!(studio.send("GET", "/api/state", &[], b"").status, 200);
+}
+
+/// The spec that grew the studio past 24 GB (a metre-wide plane of 20,000
+/// lenses) is refused when the device is asked for, before it is built,
+/// and the studio goes on answering.
+#[test]
+fn a_design_past_the_budget_is_refused_not_built() {
+    let studio = Studio::start("budget");
+    let huge = "[surface]\nkind = \"plane\"\n[layout]\nwidth = 1000.0\nheight = 1000.0\nperiod = 0.05\n[profile]\nkind = \"rings\"\n";
+    let r = studio.send("PUT", "/api/spec", &[], huge.as_bytes());
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    let r = studio.send("GET", "/api/report", &[], b"");
+    assert_eq!(r.status, 422);
+    let error = r.json()["error"].as_str().unwrap().to_string();
+    assert!(
+        error.contains("layout.width") && error.contains("--allow-large"),
+        "{error}"
+    );
     assert_eq!(studio.send("GET", "/api/state", &[], b"").status, 200);
 }

@@ -66,6 +66,8 @@ pub struct StudioOptions {
     pub out: PathBuf,
     pub host: IpAddr,
     pub port: u16,
+    /// Build designs over the mesh budget (`--allow-large`).
+    pub allow_large: bool,
 }
 
 /// Where the spec's text and its images live.
@@ -89,6 +91,8 @@ pub struct Revision {
     device: Built<DeviceView>,
     mold: Built<MoldView>,
     explore: Built<ExploreView>,
+    /// Set once a newer revision replaces this one: its builds stop.
+    replaced: AtomicBool,
 }
 
 impl Revision {
@@ -102,6 +106,7 @@ impl Revision {
             device: OnceLock::new(),
             mold: OnceLock::new(),
             explore: OnceLock::new(),
+            replaced: AtomicBool::new(false),
         }
     }
 
@@ -123,15 +128,27 @@ impl Revision {
     async fn cached<T: Send + Sync + 'static>(
         self: &Arc<Self>,
         cell: fn(&Revision) -> &Built<T>,
-        build: fn(&Spec) -> anyhow::Result<T>,
+        build: fn(&Spec, &dyn Progress) -> anyhow::Result<T>,
     ) -> Result<Arc<T>, String> {
         let rev = self.clone();
         blocking(move || {
+            let stop = Replaced(&rev.replaced);
             cell(&rev)
-                .get_or_init(|| build(&rev.spec).map(Arc::new).map_err(cli_words))
+                .get_or_init(|| build(&rev.spec, &stop).map(Arc::new).map_err(cli_words))
                 .clone()
         })
         .await
+    }
+}
+
+/// A build's progress that says it is no longer wanted once its revision
+/// is replaced: the build stops at its next stage instead of running on
+/// (a replaced revision's device of 11 GB had kept growing beside the new).
+struct Replaced<'a>(&'a AtomicBool);
+
+impl Progress for Replaced<'_> {
+    fn cancelled(&self) -> bool {
+        self.0.load(Ordering::SeqCst)
     }
 }
 
@@ -161,6 +178,8 @@ pub struct Studio {
     revisions: AtomicU64,
     /// Progress and results of writes, as server-sent events.
     events: broadcast::Sender<String>,
+    /// `--allow-large`: designs over the mesh budget are built.
+    allow_large: bool,
     /// Permits for event streams ([`MAX_EVENT_STREAMS`]).
     streams: Arc<tokio::sync::Semaphore>,
     writing: AtomicBool,
@@ -207,8 +226,12 @@ impl Studio {
                 })]);
             }
         }
-        moirecast_spec::parse(text, &self.file_name(), self.images())
-            .map_err(|e| vec![spec_error_json(&e)])
+        let mut spec = moirecast_spec::parse(text, &self.file_name(), self.images())
+            .map_err(|e| vec![spec_error_json(&e)])?;
+        if self.allow_large {
+            spec.design.mesh_budget = moirecast_kernel::MeshBudget::UNLIMITED;
+        }
+        Ok(spec)
     }
 
     /// The state the page shows: the spec's text and values, and the design.
@@ -362,6 +385,7 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
         revisions: AtomicU64::new(1),
         events: broadcast::channel(1024).0,
         streams: Arc::new(tokio::sync::Semaphore::new(MAX_EVENT_STREAMS)),
+        allow_large: options.allow_large,
         writing: AtomicBool::new(false),
     };
     // the spec given must itself be valid: a studio opens on a design
@@ -662,7 +686,11 @@ async fn put_spec(State(studio): State<Arc<Studio>>, text: String) -> Response {
         Ok(spec) => {
             let number = studio.revisions.fetch_add(1, Ordering::Relaxed) + 1;
             let rev = Arc::new(Revision::new(number, text, spec));
-            *studio.current.write().expect("not poisoned") = rev.clone();
+            let old = std::mem::replace(
+                &mut *studio.current.write().expect("not poisoned"),
+                rev.clone(),
+            );
+            old.replaced.store(true, Ordering::SeqCst);
             Json(studio.state(&rev)).into_response()
         }
     }

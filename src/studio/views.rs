@@ -8,7 +8,7 @@ use crate::{measure_device, mesh_spec, refuse_failed, DeviceBuild, RunError, Tho
 use anyhow::{Context, Result};
 use moirecast_export::stl_bytes;
 use moirecast_kernel::check::SolidMesh;
-use moirecast_kernel::progress::Silent;
+use moirecast_kernel::progress::{Progress, Silent};
 use moirecast_render::frame::Integrator;
 use moirecast_spec::Spec;
 
@@ -21,8 +21,8 @@ pub struct DeviceView {
 }
 
 impl DeviceView {
-    pub fn build(spec: &Spec) -> Result<DeviceView> {
-        let mesh = mesh_spec(spec, &Silent)?;
+    pub fn build(spec: &Spec, progress: &dyn Progress) -> Result<DeviceView> {
+        let mesh = mesh_spec(spec, progress)?;
         let (mut checks, solid) = SolidMesh::validate(&mesh.mesh);
         refuse_failed(&checks)?;
         let stl = stl_bytes("device.stl", solid.context("the solid checks passed")?)?;
@@ -63,11 +63,14 @@ pub struct MoldView {
 }
 
 impl MoldView {
-    pub fn build(spec: &Spec) -> Result<MoldView> {
+    pub fn build(spec: &Spec, progress: &dyn Progress) -> Result<MoldView> {
         if let moirecast_kernel::BaseKind::Printed(_) = spec.design.params.base.kind {
             return Err(RunError::mold(spec, moirecast_mold::MoldError::NotCastable).into());
         }
-        let mesh = mesh_spec(spec, &Silent)?;
+        let mesh = mesh_spec(spec, progress)?;
+        if progress.cancelled() {
+            anyhow::bail!("cancelled: a newer design replaced this one");
+        }
         let mold = moirecast_mold::build_mold(&spec.design, &mesh, &spec.mold, &Silent)
             .map_err(|e| RunError::mold(spec, e))?;
         let half = |name: &str, half: &moirecast_kernel::check::CheckedMesh| -> Result<Vec<u8>> {
@@ -100,7 +103,7 @@ pub struct ExploreView {
 }
 
 impl ExploreView {
-    pub fn build(spec: &Spec) -> Result<ExploreView> {
+    pub fn build(spec: &Spec, progress: &dyn Progress) -> Result<ExploreView> {
         let options = RenderOptions {
             size: 96,
             samples: 2,
@@ -112,7 +115,7 @@ impl ExploreView {
             tracer: Tracer::Sections,
             seed: 1,
         };
-        let grid = explore_grid(spec, &options, &Silent)?;
+        let grid = explore_grid(spec, &options, progress)?;
         Ok(ExploreView {
             thumbnails: grid
                 .frames

@@ -38,6 +38,7 @@ pub fn start_studio(spec: std::path::PathBuf, out: std::path::PathBuf) -> u16 {
         out,
         host: "127.0.0.1".parse().unwrap(),
         port: 0,
+        allow_large: false,
     };
     std::thread::spawn(move || {
         moirecast::studio::run(options, |url| sender.send(url.to_string()).unwrap()).unwrap()

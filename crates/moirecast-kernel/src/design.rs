@@ -183,27 +183,57 @@ pub mod limits {
     pub const BACKING_MM: (f64, f64) = (0.01, 50.0);
 }
 
-/// The largest mesh the mesher makes for a design. Not a validity rule: a
+/// The largest run the mesher starts for a design. Not a validity rule: a
 /// design over it is sound but would take more time and memory than a
-/// user expects (`moirecast --allow-large` lifts it).
+/// user expects (`--allow-large` lifts it, on the command line and the
+/// studio's).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MeshBudget {
-    /// Most device triangles, estimated from the curvature survey before
-    /// any vertex is made; `None`: no limit.
-    pub max_triangles: Option<u64>,
+    /// Most bytes a mold run of the design may hold at its peak, estimated
+    /// from the curvature survey before any vertex is made
+    /// ([`MeshBudget::estimated_bytes`]); `None`: no limit.
+    pub max_bytes: Option<f64>,
+    /// Most survey cells (lenses × cells along each): the survey that makes
+    /// the estimate costs about 0.6 µs a cell, so past this it is the
+    /// runaway (20,000 lenses over 1000 mm: 500 s); `None`: no limit.
+    pub max_survey_cells: Option<u64>,
 }
 
 impl MeshBudget {
-    /// 20 M triangles: about 8 GB at the peak of a mold run.
+    /// 4 GB at a mold run's peak (the 180 mm reference mold: 1.6 GB), and
+    /// 64 M survey cells (about 40 s of survey).
     pub const DEFAULT: MeshBudget = MeshBudget {
-        max_triangles: Some(20_000_000),
+        max_bytes: Some(4e9),
+        max_survey_cells: Some(64_000_000),
     };
     pub const UNLIMITED: MeshBudget = MeshBudget {
-        max_triangles: None,
+        max_bytes: None,
+        max_survey_cells: None,
     };
-    /// Bytes a run holds at its peak per device triangle: 205 MB for the
-    /// reference mold's 493 k triangles (the device alone: about 200).
-    pub const BYTES_PER_TRIANGLE: f64 = 420.0;
+    /// Bytes a mold run holds at its peak per device triangle (the mesh,
+    /// its checks and the halves cut from it).
+    pub const BYTES_PER_TRIANGLE: f64 = 600.0;
+    /// Bytes per lens station of the B-rep (NURBS, topology, STEP text).
+    pub const BYTES_PER_LENS_STATION: f64 = 2200.0;
+    /// Bytes a run holds whatever the design (the process, the profile).
+    pub const BYTES_BASE: f64 = 30e6;
+
+    /// The bytes a mold run of `design` holds at its peak, for a mesh of
+    /// `triangles`: the mesh's share and the B-rep's, whose lenses each
+    /// hold about 2 (H / spacing + 10) stations, the spacing 2 mm or a
+    /// procedural profile's detail (docs/benchmarks.md measures it
+    /// against the peak RSS).
+    pub fn estimated_bytes(design: &Design, triangles: u64) -> f64 {
+        let detail = match design.params.profile {
+            Profile::Sampled(_) => None,
+            ref procedural => procedural.detail_mm(),
+        };
+        let spacing = detail.map_or(2.0, |d| d.min(2.0));
+        let stations = 2.0 * (design.params.height / spacing + 10.0);
+        Self::BYTES_BASE
+            + Self::BYTES_PER_TRIANGLE * triangles as f64
+            + Self::BYTES_PER_LENS_STATION * design.lenses as f64 * stations
+    }
 }
 
 impl Default for MeshBudget {

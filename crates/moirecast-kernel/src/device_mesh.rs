@@ -89,6 +89,9 @@ pub struct MeshStats {
     /// Triangles a uniform grid needs for the same tolerance: the finest
     /// column count on every lens and the finest row spacing everywhere.
     pub uniform_triangles: usize,
+    /// What the budget estimated, before any vertex, a mold run of the
+    /// design holds at its peak ([`crate::MeshBudget::estimated_bytes`]).
+    pub estimated_peak_bytes: f64,
 }
 
 /// The device mesh with the provenance of every vertex and triangle.

@@ -92,6 +92,9 @@ pub enum KernelError {
     /// design at the edge of validity; the message names the solve and place.
     #[error("solver did not converge: {0}")]
     Solver(String),
+    /// The caller stopped the work ([`crate::progress::Progress::cancelled`]).
+    #[error("cancelled: the work was no longer wanted")]
+    Cancelled,
     /// A mesh failed one of its invariants (METHOD §7.1). Carries the check.
     #[error("mesh check `{name}` failed: {detail}")]
     MeshCheck { name: &'static str, detail: String },

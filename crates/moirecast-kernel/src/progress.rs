@@ -6,6 +6,12 @@ pub trait Progress: Sync {
     fn stage(&self, _name: &'static str, _total: u64) {}
     /// `n` more units done in the current stage.
     fn tick(&self, _n: u64) {}
+    /// Whether the work is no longer wanted: the mesher then stops at its
+    /// next stage with [`crate::KernelError::Cancelled`] (the studio's
+    /// build of a revision a newer one replaced).
+    fn cancelled(&self) -> bool {
+        false
+    }
 }
 
 /// Reports nothing.

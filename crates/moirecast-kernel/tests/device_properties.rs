@@ -360,3 +360,21 @@ proptest! {
         }
     }
 }
+
+/// A mesher whose caller no longer wants the work stops at its next stage
+/// with `Cancelled` (the studio's build of a replaced revision).
+#[test]
+fn a_cancelled_mesh_stops() {
+    struct Unwanted;
+    impl moirecast_kernel::progress::Progress for Unwanted {
+        fn cancelled(&self) -> bool {
+            true
+        }
+    }
+    let d = Design::new(params(PitchSurface::Saddle { radius: 60.0 }, 6, 3.0, 0.5)).unwrap();
+    assert!(matches!(
+        mesh_device(&d, &Unwanted),
+        Err(KernelError::Cancelled)
+    ));
+    assert!(mesh_device(&d, &Silent).is_ok());
+}

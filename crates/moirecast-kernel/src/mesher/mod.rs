@@ -42,8 +42,15 @@ pub use crate::device_mesh::{DeviceMesh, MeshStats, Patch, Side, VertexOrigin};
 /// the revealer's and the base's vertices, then zip the lens strips and
 /// the walls between them.
 pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMesh> {
+    let stop = || match progress.cancelled() {
+        true => Err(crate::KernelError::Cancelled),
+        false => Ok(()),
+    };
     let mut plan = plan::plan(design, progress)?;
     plan.within_budget(design)?;
+    let estimated_peak_bytes =
+        crate::MeshBudget::estimated_bytes(design, plan.estimated_triangles(design.lenses));
+    stop()?;
     let mut revealer = revealer::vertices(design, &plan, progress)?;
     for _ in 0..bend::MAX_BEND_PASSES {
         let bent = bend::revealer_rows(
@@ -58,7 +65,9 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
         }
         revealer = revealer::vertices(design, &plan, &crate::progress::Silent)?;
     }
+    stop()?;
     let (base_ys, mut base_rows) = base::rows(design, &plan, progress)?;
+    stop()?;
     progress.stage("triangles", 1);
     // Where an x-wall folds (a sparse revealer edge over a steep, wavy
     // base edge), revealer rows are added there and the top remade; where
@@ -113,6 +122,7 @@ pub fn mesh_device(design: &Design, progress: &dyn Progress) -> Result<DeviceMes
             dm.mesh.positions.len(),
             counts,
         );
+        dm.stats.estimated_peak_bytes = estimated_peak_bytes;
         dm.mesh.triangles = tris;
         dm.patches = patches;
         return Ok(dm);
@@ -213,5 +223,6 @@ fn stats(
         uniform_triangles: 2 * n * rev_cols_max * uniform_rev_rows
             + 2 * base_lenses_inside * base_cols_max * plan.uniform_base_rows
             + wall_triangles,
+        estimated_peak_bytes: 0.0,
     }
 }

@@ -105,31 +105,31 @@ impl MeshPlan {
         }
     }
 
-    /// Refuses a plan over the design's mesh budget, naming the estimate,
-    /// the limit and the fix.
+    /// Refuses a plan over the design's budget of bytes, naming the
+    /// estimate, the limit and the fix.
     pub fn within_budget(&self, design: &Design) -> Result<()> {
-        let Some(limit) = design.mesh_budget.max_triangles else {
+        let Some(limit) = design.mesh_budget.max_bytes else {
             return Ok(());
         };
-        let estimate = self.estimated_triangles(design.lenses);
-        if estimate <= limit {
+        let triangles = self.estimated_triangles(design.lenses);
+        let bytes = crate::MeshBudget::estimated_bytes(design, triangles);
+        if bytes <= limit {
             return Ok(());
         }
-        let gb = |t: u64| t as f64 * crate::MeshBudget::BYTES_PER_TRIANGLE / 1e9;
         // triangles fall as 1/tolerance along and across the lenses
-        let coarser = design.tolerance.mm() * estimate as f64 / limit as f64;
+        let coarser = design.tolerance.mm() * bytes / limit;
         Err(crate::DesignError {
             param: crate::Param::Tolerance,
             value: design.tolerance.mm().to_string(),
             problem: format!(
-                "the mesh would have about {:.1} M triangles (about {:.1} GB at a mold run's peak), over the budget of {:.0} M ({:.0} GB)",
-                estimate as f64 / 1e6,
-                gb(estimate),
-                limit as f64 / 1e6,
-                gb(limit)
+                "the design would take about {:.1} GB at a mold run's peak ({:.1} M triangles, {} lenses), over the budget of {:.1} GB",
+                bytes / 1e9,
+                triangles as f64 / 1e6,
+                design.lenses,
+                limit / 1e9
             ),
             fix: format!(
-                "use a coarser mesh.tolerance (about {:.4} mm) or a smaller layout, or pass --allow-large",
+                "use a coarser mesh.tolerance (about {:.4} mm), a smaller layout or a larger period, or pass --allow-large",
                 coarser.min(crate::Tolerance::MAX_MM)
             ),
         }
@@ -137,14 +137,45 @@ impl MeshPlan {
     }
 }
 
+/// Refuses a design whose curvature survey alone is past the budget of
+/// survey cells (lenses × cells along them, both arrays), before it runs.
+fn survey_within_budget(design: &Design, planner: &Planner) -> Result<()> {
+    let Some(limit) = design.mesh_budget.max_survey_cells else {
+        return Ok(());
+    };
+    let cells = planner.cells_over(2.0 * design.half_height, SURVEY_CELLS) as u64;
+    let work = 2 * design.lenses as u64 * cells;
+    if work <= limit {
+        return Ok(());
+    }
+    Err(crate::DesignError {
+        param: crate::Param::Width,
+        value: design.params.width.to_string(),
+        problem: format!(
+            "{} lenses over {:.0} mm need a survey of {:.0} M cells before meshing, over the budget of {:.0} M (about {:.0} s); the design is larger than a run should take",
+            design.lenses,
+            design.params.height,
+            work as f64 / 1e6,
+            limit as f64 / 1e6,
+            limit as f64 * 0.6e-6
+        ),
+        fix: "use a smaller layout or a larger period, or pass --allow-large".into(),
+    }
+    .into())
+}
+
 /// Surveys every lens and plans the rows and columns of `design`'s mesh.
 pub(super) fn plan(design: &Design, progress: &dyn Progress) -> Result<MeshPlan> {
     let planner = Planner { design };
+    survey_within_budget(design, &planner)?;
     let hh = design.half_height;
     progress.stage("surveying curvature", 2);
     let (revealer_columns, (revealer_rows, revealer_edge_blend), revealer_kmax) =
         planner.revealer_plan();
     progress.tick(1);
+    if progress.cancelled() {
+        return Err(crate::KernelError::Cancelled);
+    }
     let (base_columns, base_k, crease_samples) = planner.base_survey()?;
     progress.tick(1);
     let mut base_rows = rows_from_curvature(-hh, hh, &base_k, ALONG_SHARE * planner.tol(), 1);
