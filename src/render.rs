@@ -145,6 +145,23 @@ impl LightsChoice {
 }
 
 impl RenderOptions {
+    /// The command line's defaults at `size` px, N = `samples`, over
+    /// `tilts_deg`: the branching integrator through the sections where
+    /// they apply, the default lights, the design view's camera.
+    pub fn preview(size: usize, samples: usize, tilts_deg: Vec<f64>) -> RenderOptions {
+        RenderOptions {
+            size,
+            samples,
+            tilts_deg,
+            tilt_along_deg: 0.0,
+            camera_distance_mm: None,
+            lights: LightsChoice::Default,
+            integrator: Integrator::default(),
+            tracer: Tracer::Sections,
+            seed: 1,
+        }
+    }
+
     /// Whether the sections trace every pixel the device covers in these
     /// frames: the branching integrator through a dual-lens device's
     /// sections, an orthographic camera, no tilt along.

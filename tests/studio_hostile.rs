@@ -252,18 +252,7 @@ fn idle_sockets_are_closed_and_the_studio_answers() {
 fn beyond_loopback_every_request_needs_the_session_token() {
     let dir = scratch("studio-hostile", "token");
     std::fs::write(dir.join("design.toml"), SMALL).unwrap();
-    let (sender, receiver) = std::sync::mpsc::channel();
-    let options = moirecast::studio::StudioOptions {
-        spec: Some(dir.join("design.toml")),
-        out: dir.join("out"),
-        host: "0.0.0.0".parse().unwrap(),
-        port: 0,
-        allow_large: false,
-    };
-    std::thread::spawn(move || {
-        moirecast::studio::run(options, |url| sender.send(url.to_string()).unwrap()).unwrap()
-    });
-    let url = receiver.recv().unwrap();
+    let url = http::start_studio_at(dir.join("design.toml"), dir.join("out"), "0.0.0.0");
     let (address, token) = url
         .split_once("/?token=")
         .expect("the URL carries the token");

@@ -6,10 +6,10 @@
 //! Measured at 256 px (the render's default), the numbers are printed:
 //! `cargo test --test view_compensation -- --nocapture`.
 
-use moirecast::render::{render_frames, LightsChoice, RenderOptions, RenderedFrame, Tracer};
+use moirecast::render::{render_frames, RenderOptions, RenderedFrame};
 use moirecast_kernel::progress::Silent;
 use moirecast_kernel::{Design, PitchSurface};
-use moirecast_render::frame::{Frame, Integrator};
+use moirecast_render::frame::Frame;
 use moirecast_spec::Spec;
 
 fn load(name: &str) -> Spec {
@@ -27,17 +27,7 @@ fn on_a_plane(name: &str) -> Spec {
 }
 
 fn frames(spec: &Spec, tilts: &[f64]) -> Vec<Frame> {
-    let options = RenderOptions {
-        size: 256,
-        samples: 4,
-        tilts_deg: tilts.to_vec(),
-        tilt_along_deg: 0.0,
-        camera_distance_mm: None,
-        lights: LightsChoice::Default,
-        integrator: Integrator::default(),
-        tracer: Tracer::Sections,
-        seed: 1,
-    };
+    let options = RenderOptions::preview(256, 4, tilts.to_vec());
     let mut out = Vec::new();
     render_frames(spec, &options, &Silent, &mut |r: RenderedFrame| {
         out.push(r.frame);

@@ -2,14 +2,13 @@
 //! (mesh, STL, report), the mold halves, the explore grid.
 
 use crate::explore::{explore_grid, Cell, FlatSheet};
-use crate::render::{png, LightsChoice, RenderOptions, Tracer};
+use crate::render::{png, RenderOptions};
 use crate::report::{device_report, CheckReport, DeviceOutputs, FileReport};
 use crate::{measure_device, mesh_spec, refuse_failed, DeviceBuild, RunError, Thoroughness};
 use anyhow::{Context, Result};
 use moirecast_export::stl_bytes;
 use moirecast_kernel::check::SolidMesh;
 use moirecast_kernel::progress::{Progress, Silent};
-use moirecast_render::frame::Integrator;
 use moirecast_spec::Spec;
 
 /// The device as the page shows it: its STL and its report.
@@ -104,17 +103,7 @@ pub struct ExploreView {
 
 impl ExploreView {
     pub fn build(spec: &Spec, progress: &dyn Progress) -> Result<ExploreView> {
-        let options = RenderOptions {
-            size: 96,
-            samples: 2,
-            tilts_deg: vec![-5.0, 0.0, 5.0],
-            tilt_along_deg: 0.0,
-            camera_distance_mm: None,
-            lights: LightsChoice::Default,
-            integrator: Integrator::default(),
-            tracer: Tracer::Sections,
-            seed: 1,
-        };
+        let options = RenderOptions::preview(96, 2, vec![-5.0, 0.0, 5.0]);
         let grid = explore_grid(spec, &options, progress)?;
         Ok(ExploreView {
             thumbnails: grid

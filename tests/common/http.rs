@@ -32,24 +32,30 @@ impl Response {
 /// Starts `moirecast studio` on a free loopback port, serving from its own
 /// thread; returns the port.
 pub fn start_studio(spec: std::path::PathBuf, out: std::path::PathBuf) -> u16 {
-    let (sender, receiver) = std::sync::mpsc::channel();
-    let options = moirecast::studio::StudioOptions {
-        spec: Some(spec),
-        out,
-        host: "127.0.0.1".parse().unwrap(),
-        port: 0,
-        allow_large: false,
-    };
-    std::thread::spawn(move || {
-        moirecast::studio::run(options, |url| sender.send(url.to_string()).unwrap()).unwrap()
-    });
-    let url = receiver.recv().unwrap();
+    let url = start_studio_at(spec, out, "127.0.0.1");
     url.trim_end_matches('/')
         .rsplit(':')
         .next()
         .unwrap()
         .parse()
         .unwrap()
+}
+
+/// Starts `moirecast studio` listening on `host` (port 0), serving from its
+/// own thread; returns the URL it prints.
+pub fn start_studio_at(spec: std::path::PathBuf, out: std::path::PathBuf, host: &str) -> String {
+    let (sender, receiver) = std::sync::mpsc::channel();
+    let options = moirecast::studio::StudioOptions {
+        spec: Some(spec),
+        out,
+        host: host.parse().unwrap(),
+        port: 0,
+        allow_large: false,
+    };
+    std::thread::spawn(move || {
+        moirecast::studio::run(options, |url| sender.send(url.to_string()).unwrap()).unwrap()
+    });
+    receiver.recv().unwrap()
 }
 
 /// `method target` with `body` to 127.0.0.1:`port`, with `Host: host`.

@@ -14,40 +14,23 @@
 //    are unchanged. The studio cannot be framed by it either.
 // Exits non-zero, saying why, on any failure.
 
-import { spawn } from "node:child_process";
-import { copyFileSync, existsSync, mkdirSync, readFileSync, readdirSync } from "node:fs";
+import { copyFileSync, existsSync, readFileSync, readdirSync } from "node:fs";
 import { createServer } from "node:http";
-import { dirname, join } from "node:path";
-import { fileURLToPath } from "node:url";
-import { chromium } from "playwright-core";
+import { join } from "node:path";
+import { launchChromium, referenceInto, startStudio } from "./launch.mjs";
 
 const [bin, work] = process.argv.slice(2);
 if (!bin || !work) {
   console.error("usage: node studio-hostile.mjs MOIRECAST_BIN WORKDIR");
   process.exit(2);
 }
-const repo = join(dirname(fileURLToPath(import.meta.url)), "..", "..");
-mkdirSync(join(work, "profiles"), { recursive: true });
-copyFileSync(join(repo, "molds", "saddle-horse.toml"), join(work, "design.toml"));
-copyFileSync(join(repo, "molds", "profiles", "horse.png"), join(work, "profiles", "horse.png"));
+const repo = referenceInto(work);
 const evil = `<img src=x onerror="document.title='PWNED'">.png`;
 copyFileSync(join(repo, "molds", "profiles", "horse.png"), join(work, evil));
 const specBefore = readFileSync(join(work, "design.toml"), "utf8");
 const out = join(work, "out");
 
-const server = spawn(bin, ["studio", join(work, "design.toml"), "-o", out, "--port", "0"], {
-  stdio: ["ignore", "pipe", "inherit"],
-});
-const url = await new Promise((resolve, reject) => {
-  let text = "";
-  server.stdout.on("data", (chunk) => {
-    text += chunk;
-    const m = text.match(/moirecast studio: (http:\/\/\S+)/);
-    if (m) resolve(m[1]);
-  });
-  server.on("exit", (code) => reject(new Error(`the studio exited (${code}) before printing its URL`)));
-  setTimeout(() => reject(new Error("no URL after 30 s")), 30000);
-});
+const { server, url } = await startStudio(bin, join(work, "design.toml"), out);
 
 // the other site: a page that tries the writes and frames the studio
 const attack = `<!doctype html><html><body>
@@ -73,13 +56,7 @@ const site = createServer((req, res) => {
 await new Promise((resolve) => site.listen(0, "127.0.0.1", resolve));
 const siteUrl = `http://127.0.0.1:${site.address().port}/`;
 
-const browser = await chromium.launch({
-  executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
-  args: [
-    "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-  ],
-});
+const browser = await launchChromium();
 let failed = false;
 const check = (ok, what) => {
   console.log(`${ok ? "ok  " : "FAIL"} ${what}`);

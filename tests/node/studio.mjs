@@ -11,45 +11,21 @@
 // "Write device files" writes device.stl into the output folder. Saves a
 // screenshot of the page. Exits non-zero, saying why, on any failure.
 
-import { spawn } from "node:child_process";
-import { copyFileSync, existsSync, mkdirSync } from "node:fs";
-import { dirname, join } from "node:path";
-import { fileURLToPath } from "node:url";
-import { chromium } from "playwright-core";
+import { existsSync } from "node:fs";
+import { join } from "node:path";
+import { launchChromium, referenceInto, startStudio } from "./launch.mjs";
 
 const [bin, work, screenshot] = process.argv.slice(2);
 if (!bin || !work || !screenshot) {
   console.error("usage: node studio.mjs MOIRECAST_BIN WORKDIR SCREENSHOT");
   process.exit(2);
 }
-const repo = join(dirname(fileURLToPath(import.meta.url)), "..", "..");
-mkdirSync(join(work, "profiles"), { recursive: true });
-copyFileSync(join(repo, "molds", "saddle-horse.toml"), join(work, "design.toml"));
-copyFileSync(join(repo, "molds", "profiles", "horse.png"), join(work, "profiles", "horse.png"));
+referenceInto(work);
 const out = join(work, "out");
 
-const server = spawn(bin, ["studio", join(work, "design.toml"), "-o", out, "--port", "0"], {
-  stdio: ["ignore", "pipe", "inherit"],
-});
-const url = await new Promise((resolve, reject) => {
-  let text = "";
-  server.stdout.on("data", (chunk) => {
-    text += chunk;
-    const m = text.match(/moirecast studio: (http:\/\/\S+)/);
-    if (m) resolve(m[1]);
-  });
-  server.on("exit", (code) => reject(new Error(`the studio exited (${code}) before printing its URL`)));
-  setTimeout(() => reject(new Error("no URL after 30 s")), 30000);
-});
+const { server, url } = await startStudio(bin, join(work, "design.toml"), out);
 
-const browser = await chromium.launch({
-  executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
-  args: [
-    "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-    "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-  ],
-});
+const browser = await launchChromium();
 let failed = false;
 const check = (ok, what) => {
   console.log(`${ok ? "ok  " : "FAIL"} ${what}`);

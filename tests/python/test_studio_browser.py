@@ -26,30 +26,27 @@ def browser_tools():
     return node
 
 
+def run_in_chromium(script, *args):
+    """Runs a tests/node script that drives Debian's chromium; it passes
+    when it exits 0 and printed no FAIL."""
+    run = subprocess.run(
+        [browser_tools(), str(script), str(BIN), *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    print(run.stdout)
+    assert run.returncode == 0, f"{run.stdout}\n{run.stderr}"
+    assert "FAIL" not in run.stdout
+
+
 def test_the_studio_refuses_hostile_pages_and_file_names(tmp_path):
     """A PNG named like markup lists as text under a CSP that forbids inline
     script; another site's page cannot write, save, edit or frame it."""
-    run = subprocess.run(
-        [browser_tools(), str(HOSTILE), str(BIN), str(tmp_path)],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    print(run.stdout)
-    assert run.returncode == 0, f"{run.stdout}\n{run.stderr}"
-    assert "FAIL" not in run.stdout
+    run_in_chromium(HOSTILE, tmp_path)
 
 
 def test_the_studio_works_in_chromium(tmp_path):
-    node = browser_tools()
     screenshot = ROOT / "target" / "studio-screenshot.png"
-    run = subprocess.run(
-        [node, str(RUNNER), str(BIN), str(tmp_path), str(screenshot)],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    print(run.stdout)
-    assert run.returncode == 0, f"{run.stdout}\n{run.stderr}"
-    assert "FAIL" not in run.stdout
+    run_in_chromium(RUNNER, tmp_path, screenshot)
     assert screenshot.stat().st_size > 10_000
