@@ -1,9 +1,11 @@
 //! Output files: binary STL, 3MF and an all-or-nothing output directory.
 //!
 //! Nothing is written until every file of a run has been encoded and every
-//! check has passed; then each file goes to a temporary name in the target
-//! directory and is renamed into place, so a failed run leaves no partial
-//! file behind and readers never see half a file.
+//! check has passed. A run's files then replace its folder whole
+//! ([`OutputSet::commit_run`], [`run_folder`]); single files (a saved spec)
+//! go to a temporary name and are renamed into place ([`OutputSet::commit`]),
+//! so a failed run leaves no partial file behind and readers never see half
+//! a file.
 //!
 //! ```
 //! use moirecast_kernel::{check::SolidMesh, mesher::mesh_device, progress::Silent, Design, DesignParams, PitchSurface};

@@ -15,7 +15,9 @@
 //! and the single-file temporaries of earlier versions, are removed.
 //!
 //! A folder is replaced only if it is empty or a run's (its manifest lists
-//! every file in it). The studio's saved spec (`spec.toml`) and the images
+//! every file in it; a run of a version before manifests is recognised by
+//! its report.json, and only files of the names runs write count as its).
+//! The studio's saved spec (`spec.toml`) and the images
 //! it names (`profiles/`) are the one exception, and are carried over into
 //! the new run; anything else that no run wrote makes the run refuse
 //! before writing, so a user's own files are never deleted.
@@ -92,6 +94,36 @@ fn files_under(dir: &Path) -> Vec<String> {
     found
 }
 
+/// Whether `dir` holds a run of a moirecast before manifests: a
+/// report.json of moirecast's (its `"moirecast"` version key).
+fn is_earlier_run(dir: &Path) -> bool {
+    std::fs::read_to_string(dir.join("report.json"))
+        .is_ok_and(|r| r.trim_start().starts_with('{') && r.contains("\"moirecast\": \""))
+}
+
+/// Whether a file's name is one moirecast's runs write (for folders of
+/// earlier runs, which have no manifest): only those are replaced.
+fn is_output_name(name: &str) -> bool {
+    let stem_ext = |stem: &str, exts: &[&str]| {
+        name.strip_prefix(stem)
+            .is_some_and(|rest| exts.iter().any(|e| rest.ends_with(e)) && !rest.contains('/'))
+    };
+    [
+        "report.json",
+        "tilt.gif",
+        "sheet.png",
+        "grid.png",
+        "best.toml",
+        "assembly.scad",
+    ]
+    .contains(&name)
+        || stem_ext("device", &[".stl", ".step", ".3mf"])
+        || stem_ext("mold-", &[".stl", ".step"])
+        || stem_ext("construction-", &[".stl"])
+        || stem_ext("frame-", &[".png"])
+        || (name.starts_with('.') && name.ends_with(".tmp"))
+}
+
 /// A file of the studio's saved spec, which a run carries over.
 fn carried(name: &str) -> bool {
     name == "spec.toml" || name.starts_with("profiles/")
@@ -141,9 +173,11 @@ fn recover(dir: &Path) -> Result<(), ExportError> {
 fn replaceable(dir: &Path) -> Result<Vec<String>, ExportError> {
     let present = files_under(dir);
     let listed = manifest_files(dir).unwrap_or_default();
+    let earlier = listed.is_empty() && is_earlier_run(dir);
     let strangers: Vec<&String> = present
         .iter()
         .filter(|f| *f != MANIFEST && !listed.contains(f) && !carried(f))
+        .filter(|f| !(earlier && is_output_name(f)))
         .collect();
     if !strangers.is_empty() {
         let shown: Vec<&str> = strangers.iter().take(5).map(|s| s.as_str()).collect();
@@ -284,6 +318,29 @@ mod tests {
             1,
             "the folder alone"
         );
+    }
+
+    #[test]
+    fn a_run_of_an_earlier_moirecast_is_replaced_but_not_other_files() {
+        let root = scratch("earlier");
+        let dir = root.join("out");
+        std::fs::create_dir_all(&dir).unwrap();
+        for (name, text) in [
+            ("report.json", "{\n  \"moirecast\": \"0.1.0\"\n}"),
+            ("device.stl", "x"),
+            ("mold-top.step", "x"),
+            (".device.stl.9.tmp", "x"),
+        ] {
+            std::fs::write(dir.join(name), text).unwrap();
+        }
+        commit_run(&set(&[("device.stl", "b"), ("report.json", "{}")]), &dir).unwrap();
+        assert_eq!(files_under(&dir), [MANIFEST, "device.stl", "report.json"]);
+        // a note of someone's own in such a folder stops the run
+        std::fs::remove_file(dir.join(MANIFEST)).unwrap();
+        std::fs::write(dir.join("report.json"), "{\"moirecast\": \"0.1.0\"}").unwrap();
+        std::fs::write(dir.join("notes.txt"), "mine").unwrap();
+        assert!(commit_run(&set(&[("device.stl", "c")]), &dir).is_err());
+        assert!(dir.join("notes.txt").exists());
     }
 
     #[test]
