@@ -24,7 +24,7 @@ use crate::channels;
 use crate::error::BrepError;
 use crate::solid::{
     assemble, boundary_span, closed_solid, crease_curve, cubic_through, cut_to_span, face_facing,
-    lens_families, point3, surface_face,
+    lens_families, point3, surface_face, EdgeCurve,
 };
 use crate::spline::chord_lengths;
 use crate::topology::{pieces, Piece, Run};
@@ -366,7 +366,7 @@ fn build<'a>(
             )?;
             built_edges.push((
                 run.vertices.clone(),
-                curve.clone(),
+                curve.curve.clone(),
                 Sampled::of_edge(piece.patch, other.patch),
             ));
             Ok(curve)
@@ -734,7 +734,7 @@ fn edge_curve<'s>(
     run: &Run,
     lens_ends: &dyn Fn(LensRef) -> LensEnds<'s>,
     mids: &HashMap<Wall, BSplineCurve<Point3>>,
-) -> Result<Curve, BrepError> {
+) -> Result<EdgeCurve, BrepError> {
     use RegionFace::{Block, Lens, Wall as DeviceWall};
     let at = |v: u32| frame.mesh.positions[v as usize];
     let pts: Vec<DVec3> = run.vertices.iter().map(|&v| at(v)).collect();
@@ -745,9 +745,9 @@ fn edge_curve<'s>(
             | (_, RegionFace::ChannelSide(..) | RegionFace::ChannelEnd(_))
     ) {
         return if collinear(&pts) {
-            Ok(line())
+            Ok(line().into())
         } else {
-            channel_edge(frame, pair, &pts, lens_ends, mids)
+            channel_edge(frame, pair, &pts, lens_ends, mids).map(EdgeCurve::from)
         };
     }
     match pair {
@@ -773,20 +773,20 @@ fn edge_curve<'s>(
                         pts[pts.len() - 1]
                     ))
                 })?;
-            Ok(Curve::BSplineCurve(crease_curve(surface, t, a.y, b.y)))
+            Ok(EdgeCurve::fixed(Curve::BSplineCurve(crease_curve(
+                surface, t, a.y, b.y,
+            ))))
         }
         (Lens(_), DeviceWall(w)) | (DeviceWall(w), Lens(_)) => {
-            Ok(Curve::BSplineCurve(cubic_through(&pts, |p| {
-                onto(&frame.outline, w, p)
-            })))
+            Ok(Curve::BSplineCurve(cubic_through(&pts, |p| onto(&frame.outline, w, p))).into())
         }
         (DeviceWall(w), Block(RegionSurface::Skirt(_)))
         | (Block(RegionSurface::Skirt(_)), DeviceWall(w)) => {
-            Ok(along_run(mids[&w].clone(), w, run, frame))
+            Ok(along_run(mids[&w].clone(), w, run, frame).into())
         }
         (Block(RegionSurface::Skirt(w)), Block(RegionSurface::Side(_)))
         | (Block(RegionSurface::Side(_)), Block(RegionSurface::Skirt(w))) => {
-            Ok(along_run(carried_out(frame, w, &mids[&w]), w, run, frame))
+            Ok(along_run(carried_out(frame, w, &mids[&w]), w, run, frame).into())
         }
         (Block(RegionSurface::BumpSide(k, _)), Block(_))
         | (Block(_), Block(RegionSurface::BumpSide(k, _)))
@@ -795,11 +795,11 @@ fn edge_curve<'s>(
             let bump = frame.bumps.get(&k).ok_or_else(|| {
                 BrepError::Topology(format!("corner square {k} has a bump side but no bump"))
             })?;
-            Ok(arc(bump, &pts))
+            Ok(arc(bump, &pts).into())
         }
         // wall corners, skirt ends, a bump's seams, the corner squares',
         // the sides' and the cap's edges: straight
-        _ if collinear(&pts) => Ok(line()),
+        _ if collinear(&pts) => Ok(line().into()),
         (a, b) => Err(BrepError::Topology(format!(
             "no edge curve for {a:?} against {b:?} along {} points",
             pts.len()

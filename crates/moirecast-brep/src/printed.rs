@@ -22,7 +22,7 @@ use crate::error::BrepError;
 use crate::lenses::{worst_deviation, LensFamily};
 use crate::solid::{
     assemble, boundary_span, crease_curve, cut_to_span, lens_families, surface_face, trim_curve,
-    wall_face, FIT_SHARE,
+    wall_face, EdgeCurve, FIT_SHARE,
 };
 use crate::spline::chord_lengths;
 use crate::topology::{pieces, Piece, Run};
@@ -345,7 +345,7 @@ impl BodyGeometry<'_> {
         piece: &Piece<BodyFace>,
         other: &Piece<BodyFace>,
         run: &Run,
-    ) -> Result<Curve, BrepError> {
+    ) -> Result<EdgeCurve, BrepError> {
         // the face with a lens or band surface decides the curve
         let (surface_face, other_face) = match (lens_of(piece.patch), lens_of(other.patch)) {
             (Some(_), _) => (piece.patch, other.patch),
@@ -355,18 +355,18 @@ impl BodyGeometry<'_> {
                 // (a wall corner's vertices lie on the outline only to the
                 // mesher's wall snap, as in the device's B-rep)
                 let pts: Vec<DVec3> = run.vertices.iter().map(|&v| self.at(v)).collect();
-                return Ok(Curve::BSplineCurve(polyline(&pts)));
+                return Ok(Curve::BSplineCurve(polyline(&pts)).into());
             }
         };
         let (lens, layer) = lens_of(surface_face).expect("chosen for its surface");
         if other_face == BodyFace::Repaired {
             // the band's repaired outline: the mesh's own edges
             let pts: Vec<DVec3> = run.vertices.iter().map(|&v| self.at(v)).collect();
-            return Ok(Curve::BSplineCurve(polyline(&pts)));
+            return Ok(Curve::BSplineCurve(polyline(&pts)).into());
         }
         if let BodyFace::Wall(side) = other_face {
             let pts: Vec<DVec3> = run.vertices.iter().map(|&v| self.at(v)).collect();
-            return Ok(trim_curve(self.surfaces.design, side, &pts));
+            return Ok(trim_curve(self.surfaces.design, side, &pts).into());
         }
         // a crease of the surface: t = 0 or t = 1 at every vertex
         let params: Vec<DVec2> = run
@@ -384,7 +384,9 @@ impl BodyGeometry<'_> {
         };
         let surface = self.surface_of(lens, layer)?;
         let (v0, v1) = (params[0].y, params.last().unwrap().y);
-        Ok(Curve::BSplineCurve(crease_curve(&surface, t, v0, v1)))
+        Ok(EdgeCurve::fixed(Curve::BSplineCurve(crease_curve(
+            &surface, t, v0, v1,
+        ))))
     }
 
     /// The face of `piece`, bounded by `wires`, on its exact surface.
