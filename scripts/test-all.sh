@@ -53,6 +53,22 @@ if ! wait "$setup_pid"; then
 fi
 cat "$setup_log"
 
+# the API docs must build without a warning (links to private items,
+# broken links): beside the oracle tests, which need no cargo (cargo's
+# lock on the target folder would make it wait for the Rust tests), on
+# the checked build's metadata
+step "API docs (cargo doc, warnings denied) in the background"
+doc_log=target/doc.log
+RUSTDOCFLAGS="-D warnings" cargo doc --profile checked --locked --workspace --no-deps >"$doc_log" 2>&1 &
+doc_pid=$!
+
 step "independent oracle tests (pytest on both cores)"
 MOIRECAST_BIN="$PWD/target/checked/moirecast" .venv/bin/python -m pytest tests/python -q -n 2
+
+step "waiting for the API docs"
+if ! wait "$doc_pid"; then
+    cat "$doc_log"
+    echo "cargo doc found warnings" >&2
+    exit 1
+fi
 step "all tests passed"

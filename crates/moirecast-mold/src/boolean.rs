@@ -121,7 +121,7 @@ impl Traced {
     /// two rim vertices 4.5e-7 mm apart that round to one f32 point). The
     /// shape moves by at most `eps`. A pass leaves the edges next to one it
     /// collapsed for the next pass (found-843101dca9a486a4), up to
-    /// [`COLLAPSE_PASSES`].
+    /// `COLLAPSE_PASSES`.
     pub fn collapse_short_edges(self, eps: f64) -> Traced {
         let mut traced = self;
         for _ in 0..COLLAPSE_PASSES {

@@ -609,7 +609,7 @@ pub enum RegionSurface {
     /// A wall's skirt: its mid curve carried horizontally outward.
     Skirt(Wall),
     /// The flat square at a corner of the skirt, counter-clockwise from
-    /// (x min, y min), as [`Skirt::corners`].
+    /// (x min, y min), as `Skirt::corners`.
     Corner(usize),
     /// The side of a registration key's bump standing on corner square k:
     /// its first half of facets (0) or its second (1), so that an exact

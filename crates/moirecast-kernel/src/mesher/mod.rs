@@ -6,7 +6,7 @@
 //! and shared by index; the triangle count is close to the fewest that meet
 //! the tolerance, because rows and columns are spaced by the local curvature,
 //! and rows are added where the placed ones, measured, still miss it
-//! ([`bend`]).
+//! (`bend`).
 //! [`crate::measure`] measures all of this independently.
 //!
 //! **Layout of the mesh.**
