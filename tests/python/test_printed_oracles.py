@@ -165,3 +165,17 @@ def test_opencascade_reads_the_bodies_step_files(spec, printed):
         mesh = trimesh.load(str(out / f"{name}.stl"), process=False)
         v_stl = report["files"][f"{name}.stl"]["volume_mm3"]
         assert abs(step["volume"] - v_stl) <= mesh.area * tol, (name, step["volume"], v_stl)
+
+
+@pytest.mark.parametrize("spec", PRINTED_SPECS, ids=IDS)
+@pytest.mark.parametrize("deflection", [0.05, 0.01])
+def test_brepmesh_closes_both_bodies_steps(spec, deflection, printed):
+    """Each body's STEP file, meshed by OpenCascade's BRepMesh (as FreeCAD
+    and PrusaSlicer do), is closed, in as many pieces as its STL (the
+    clear body one, the black layer one per band), of its STL's volume."""
+    from test_step_oracles import brepmesh_matches_the_stl
+
+    out, report = printed(spec)
+    brepmesh_matches_the_stl(out / "device-clear.step", out / "device-clear.stl", deflection)
+    bands = report["printed"]["bands"]
+    brepmesh_matches_the_stl(out / "device-black.step", out / "device-black.stl", deflection, pieces=bands)

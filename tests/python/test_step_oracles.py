@@ -126,39 +126,135 @@ def test_opencascade_finds_past_invalid_designs_valid(spec, tmp_path):
     assert step["faces"] == report["brep"]["faces"]
 
 
-def brepmesh_edge_uses(path, deflection):
-    """OpenCascade's BRepMesh of a STEP file at `deflection` (mm), its
-    faces' triangles joined at coinciding nodes (rounded to 1e-6 mm), and
-    how many triangles use each edge."""
-    import numpy as np
-    from OCP.BRep import BRep_Tool
-    from OCP.BRepMesh import BRepMesh_IncrementalMesh
-    from OCP.TopAbs import TopAbs_FACE, TopAbs_REVERSED
-    from OCP.TopExp import TopExp_Explorer
-    from OCP.TopLoc import TopLoc_Location
-    from OCP.TopoDS import TopoDS
+class BRepMeshed:
+    """OpenCascade's BRepMesh of a STEP file at `deflection` (mm), what
+    FreeCAD and PrusaSlicer make of it: its faces' triangles (written by
+    StlAPI, so f32 as any STL) joined at coinciding nodes, how many
+    triangles use each edge, and its connected pieces."""
 
-    shape, _ = load_step(path)
-    BRepMesh_IncrementalMesh(shape, deflection, False, 0.5, True)
-    nodes, triangles = [], []
-    faces = TopExp_Explorer(shape, TopAbs_FACE)
-    while faces.More():
-        face = TopoDS.Face(faces.Current())
-        location = TopLoc_Location()
-        mesh = BRep_Tool.Triangulation_s(face, location)
-        base, moved = len(nodes), location.Transformation()
-        for i in range(1, mesh.NbNodes() + 1):
-            p = mesh.Node(i).Transformed(moved)
-            nodes.append((p.X(), p.Y(), p.Z()))
-        for i in range(1, mesh.NbTriangles() + 1):
-            a, b, c = (base + k - 1 for k in mesh.Triangle(i).Get())
-            triangles.append((a, c, b) if face.Orientation() == TopAbs_REVERSED else (a, b, c))
-        faces.Next()
-    _, node = np.unique(np.round(np.array(nodes), 6), axis=0, return_inverse=True)
-    tri = node.reshape(-1)[np.array(triangles)]
-    edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
-    _, uses = np.unique(edges, axis=0, return_counts=True)
-    return uses
+    def __init__(self, path, deflection):
+        import tempfile
+
+        import numpy as np
+        from OCP.BRepMesh import BRepMesh_IncrementalMesh
+        from OCP.StlAPI import StlAPI_Writer
+
+        trimesh = oracle("trimesh")
+        shape, _ = load_step(path)
+        BRepMesh_IncrementalMesh(shape, deflection, False, 0.5, True)
+        with tempfile.TemporaryDirectory() as tmp:
+            stl = pathlib.Path(tmp) / "meshed.stl"
+            writer = StlAPI_Writer()
+            writer.ASCIIMode = False
+            assert writer.Write(shape, str(stl))
+            raw = trimesh.load(str(stl), process=False)
+        nodes, node = np.unique(raw.vertices.astype(np.float64), axis=0, return_inverse=True)
+        self.mesh = trimesh.Trimesh(nodes, node.reshape(-1)[raw.faces], process=False)
+        _, self.edge_uses = np.unique(self.mesh.edges_sorted, axis=0, return_counts=True)
+
+    @property
+    def open_edges(self):
+        return int((self.edge_uses == 1).sum())
+
+    @property
+    def overused_edges(self):
+        return int((self.edge_uses > 2).sum())
+
+    @property
+    def closed(self):
+        return self.open_edges == 0 and self.overused_edges == 0
+
+    def pieces(self):
+        return len(self.mesh.split(only_watertight=False))
+
+    def __str__(self):
+        return f"{self.open_edges} open edges, {self.overused_edges} used more than twice"
+
+
+def brepmesh_matches_the_stl(step, stl, deflection, pieces=1):
+    """`step` meshed by BRepMesh at `deflection` is closed (every edge of
+    its joined triangles used by exactly two), in `pieces` pieces, and
+    encloses the STL's volume to within the STL's area × deflection (both
+    meshes lie within the deflection of one exact solid)."""
+    trimesh = oracle("trimesh")
+    meshed = BRepMeshed(step, deflection)
+    assert meshed.closed, f"{step.name} at {deflection} mm: {meshed}"
+    assert meshed.pieces() == pieces, f"{step.name} at {deflection} mm"
+    reference = trimesh.load(str(stl), process=True)
+    bound = reference.area * deflection
+    assert abs(meshed.mesh.volume - reference.volume) <= bound, (step.name, deflection, meshed.mesh.volume, reference.volume)
+
+
+@pytest.mark.parametrize("spec", SPECS, ids=IDS)
+def test_brepmesh_closes_every_device_step(spec, built):
+    """Every shipped device.step, meshed by OpenCascade's BRepMesh at
+    0.01 mm (what FreeCAD and slicers do with it), is one closed piece of
+    device.stl's volume (issue 48: a trim that ended off its crease made
+    the reader fill degenerated edges: 116 open edges on 832833c's
+    reference). At 0.1 and 0.05 mm two designs still make one pair of
+    coinciding ear triangles at a corner (docs/decisions.md)."""
+    stl, _ = built(spec)
+    brepmesh_matches_the_stl(stl.with_name("device.step"), stl, 0.01)
+
+
+# Designs whose device.step OpenCascade once found invalid (the random
+# designs of test_mold_oracles.py found them), kept beside the design
+# fuzzer's corpus.
+OCC_FOUND = sorted((pathlib.Path(__file__).resolve().parents[1] / "design-corpus").glob("found-occ-*.toml"))
+
+
+@pytest.mark.parametrize("spec", OCC_FOUND, ids=[s.stem for s in OCC_FOUND])
+def test_opencascade_finds_past_invalid_designs_valid(spec, tmp_path):
+    _, report = build(spec, tmp_path / "out")
+    step = read_step(tmp_path / "out" / "device.step")
+    assert step["solids"] == 1
+    assert step["valid"], f"BRepCheck_Analyzer finds {spec.name}'s device.step invalid"
+    assert step["faces"] == report["brep"]["faces"]
+
+
+class BRepMeshed:
+    """OpenCascade's BRepMesh of a STEP file at `deflection` (mm), what
+    FreeCAD and PrusaSlicer make of it: its faces' triangles (written by
+    StlAPI, so f32 as any STL) joined at coinciding nodes, how many
+    triangles use each edge, and its connected pieces."""
+
+    def __init__(self, path, deflection):
+        import tempfile
+
+        import numpy as np
+        from OCP.BRepMesh import BRepMesh_IncrementalMesh
+        from OCP.StlAPI import StlAPI_Writer
+
+        trimesh = oracle("trimesh")
+        shape, _ = load_step(path)
+        BRepMesh_IncrementalMesh(shape, deflection, False, 0.5, True)
+        with tempfile.TemporaryDirectory() as tmp:
+            stl = pathlib.Path(tmp) / "meshed.stl"
+            writer = StlAPI_Writer()
+            writer.ASCIIMode = False
+            assert writer.Write(shape, str(stl))
+            raw = trimesh.load(str(stl), process=False)
+        nodes, node = np.unique(raw.vertices.astype(np.float64), axis=0, return_inverse=True)
+        self.mesh = trimesh.Trimesh(nodes, node.reshape(-1)[raw.faces], process=False)
+        _, self.edge_uses = np.unique(self.mesh.edges_sorted, axis=0, return_counts=True)
+
+    @property
+    def open_edges(self):
+        return int((self.edge_uses == 1).sum())
+
+    @property
+    def overused_edges(self):
+        return int((self.edge_uses > 2).sum())
+
+    @property
+    def closed(self):
+        return self.open_edges == 0 and self.overused_edges == 0
+
+    def pieces(self):
+        return len(self.mesh.split(only_watertight=False))
+
+    def __str__(self):
+        return f"{self.open_edges} open edges, {self.overused_edges} used more than twice"
 
 
 def test_brepmesh_closes_the_reference_device_step(tmp_path):
@@ -169,5 +265,5 @@ def test_brepmesh_closes_the_reference_device_step(tmp_path):
     edges on 832833c)."""
     spec = next(s for s in SPECS if s.stem == "saddle-horse")
     build(spec, tmp_path)
-    uses = brepmesh_edge_uses(tmp_path / "device.step", 0.01)
-    assert (uses == 2).all(), f"{(uses == 1).sum()} open edges, {(uses > 2).sum()} used more than twice"
+    meshed = BRepMeshed(tmp_path / "device.step", 0.01)
+    assert meshed.closed, meshed
