@@ -478,7 +478,7 @@ pub fn run_mold(
                 },
             )
         },
-        || moirecast_brep::mold_step(&spec.design, &build.mesh, &mold),
+        || moirecast_brep::mold_step(&spec.design, &build.mesh, &mold, &step.brep),
     );
     let halves = halves.map_err(|e| RunError::Internal {
         stage: "building the mold halves' B-reps",

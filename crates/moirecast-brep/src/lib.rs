@@ -114,14 +114,16 @@ pub struct MoldStep {
 }
 
 /// Builds both halves of `mold` (of the device meshed as `dm`) as exact
-/// B-rep solids ([`mold::half_brep`]) and writes each as STEP text.
+/// B-rep solids ([`mold::half_brep`]) on `device`'s lens surfaces (built
+/// once for the device and both halves), and writes each as STEP text.
 pub fn mold_step(
     design: &Design,
     dm: &DeviceMesh,
     mold: &moirecast_mold::Mold,
+    device: &DeviceBrep,
 ) -> Result<MoldStep, BrepError> {
     let half = |top: bool| -> Result<(mold::RegionBrep, StepText), BrepError> {
-        let b = mold::half_brep(design, dm, mold, top)?;
+        let b = mold::half_brep(design, dm, mold, (device, top))?;
         let (name, description) = if top {
             (
                 "mold-top.step",
