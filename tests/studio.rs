@@ -329,12 +329,24 @@ fn concurrent_frames_are_rendered_or_superseded() {
             other => panic!("status {other}"),
         }
     }
-    // one at a time, every request is rendered, and the same view gives
-    // the same bytes
+    // one at a time, every request is rendered; the same view again is
+    // the revision's cached frame, the same bytes and scores
     let a = studio.get("/api/frame.png?size=48&tilt=1");
     let b = studio.get("/api/frame.png?size=48&tilt=1");
     assert_eq!((a.status, b.status), (200, 200));
+    assert_eq!(
+        (a.header("x-frame-cache"), b.header("x-frame-cache")),
+        (Some("miss"), Some("hit"))
+    );
     assert_eq!(a.body, b.body);
+    assert_eq!(a.header("x-contrast"), b.header("x-contrast"));
+    // another view is rendered, and the first is still cached
+    let c = studio.get("/api/frame.png?size=48&tilt=1&samples=2");
+    assert_eq!(c.header("x-frame-cache"), Some("miss"));
+    assert_ne!(c.body, a.body);
+    let again = studio.get("/api/frame.png?size=48&tilt=1");
+    assert_eq!(again.header("x-frame-cache"), Some("hit"));
+    assert_eq!(again.body, a.body);
 }
 
 /// The file's bytes, or a panic naming it.

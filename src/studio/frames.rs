@@ -18,10 +18,10 @@ use moirecast_render::sheet::to_rgb8;
 use moirecast_render::Scene;
 use moirecast_spec::Spec;
 use std::cell::OnceCell;
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use tokio::sync::oneshot;
 
 /// Largest tilt (degrees) a frame request may ask for, either axis.
@@ -40,6 +40,7 @@ pub const SECTION_RAYS: usize = 1024 * 1024 * 16;
 pub const MESH_RAYS: usize = 4 * 256 * 256 * 16;
 
 /// What a frame shows.
+#[derive(Clone, Debug, PartialEq)]
 pub struct FrameRequest {
     /// About the lens axis, degrees.
     pub tilt_deg: f64,
@@ -111,11 +112,13 @@ pub struct FrameImage {
     pub fidelity: f64,
     pub local_fidelity: f64,
     pub contrast: f64,
+    /// How long it took to render (when it was rendered, for a cached one).
     pub milliseconds: f64,
 }
 
 pub enum FrameReply {
-    Done(FrameImage),
+    /// The frame, and whether it came from the revision's cache.
+    Done(Arc<FrameImage>, bool),
     /// A newer request arrived before this one was rendered.
     Superseded,
     /// The design could not be traced (the command line's words).
@@ -135,23 +138,71 @@ pub struct Frames {
     jobs: mpsc::Sender<FrameJob>,
     /// The number of the latest request.
     latest: Arc<AtomicU64>,
+    cache: Arc<Mutex<FrameCache>>,
+}
+
+/// Bytes of PNG the revision keeps: about 200 frames of 256 px.
+const CACHE_BYTES: usize = 32 << 20;
+
+/// The revision's frames already rendered, newest last, within
+/// [`CACHE_BYTES`]: a request for a view it holds (a slider back at a tilt
+/// it showed) is answered without tracing. A frame is a pure function of
+/// the revision and its request, so a cached one is the frame itself.
+#[derive(Default)]
+struct FrameCache {
+    frames: VecDeque<(FrameRequest, Arc<FrameImage>)>,
+    bytes: usize,
+}
+
+impl FrameCache {
+    fn get(&mut self, request: &FrameRequest) -> Option<Arc<FrameImage>> {
+        let at = self.frames.iter().position(|(r, _)| r == request)?;
+        let hit = self.frames.remove(at)?;
+        let image = hit.1.clone();
+        self.frames.push_back(hit);
+        Some(image)
+    }
+
+    fn put(&mut self, request: FrameRequest, image: Arc<FrameImage>) {
+        if self.get(&request).is_some() {
+            return;
+        }
+        self.bytes += image.png.len();
+        self.frames.push_back((request, image));
+        while self.bytes > CACHE_BYTES {
+            let Some((_, old)) = self.frames.pop_front() else {
+                break;
+            };
+            self.bytes -= old.png.len();
+        }
+    }
 }
 
 impl Frames {
     pub fn start(spec: Arc<Spec>) -> Frames {
         let (jobs, queue) = mpsc::channel();
         let latest = Arc::new(AtomicU64::new(0));
-        let newest = latest.clone();
+        let cache = Arc::new(Mutex::new(FrameCache::default()));
+        let (newest, kept) = (latest.clone(), cache.clone());
         std::thread::Builder::new()
             .name("studio-frames".into())
-            .spawn(move || work(&spec, queue, &newest))
+            .spawn(move || work(&spec, queue, (&newest, &kept)))
             .expect("a thread for frames");
-        Frames { jobs, latest }
+        Frames {
+            jobs,
+            latest,
+            cache,
+        }
     }
 
     /// Renders `request`, or answers that a newer one overtook it (while it
-    /// waited, or while it was traced: then it stops).
+    /// waited, or while it was traced: then it stops). A frame the revision
+    /// rendered before is answered from its cache, and overtakes nothing.
     pub async fn render(&self, request: FrameRequest) -> FrameReply {
+        let cached = self.cache.lock().expect("the frame cache").get(&request);
+        if let Some(image) = cached {
+            return FrameReply::Done(image, true);
+        }
         let (reply, answer) = oneshot::channel();
         let number = self.latest.fetch_add(1, Ordering::SeqCst) + 1;
         let job = FrameJob {
@@ -237,19 +288,26 @@ fn encoded(frame: &moirecast_render::frame::Frame, started: std::time::Instant) 
     );
     match encoded {
         Err(e) => FrameReply::Failed(format!("error: encoding the frame: {e:#}")),
-        Ok(bytes) => FrameReply::Done(FrameImage {
-            png: bytes,
-            fidelity,
-            local_fidelity,
-            contrast,
-            milliseconds: started.elapsed().as_secs_f64() * 1e3,
-        }),
+        Ok(bytes) => FrameReply::Done(
+            Arc::new(FrameImage {
+                png: bytes,
+                fidelity,
+                local_fidelity,
+                contrast,
+                milliseconds: started.elapsed().as_secs_f64() * 1e3,
+            }),
+            false,
+        ),
     }
 }
 
 /// Serves frame jobs until every sender is gone, newest first. A frame
 /// stops as soon as its client goes away or a newer request arrives.
-fn work(spec: &Spec, queue: mpsc::Receiver<FrameJob>, latest: &AtomicU64) {
+fn work(
+    spec: &Spec,
+    queue: mpsc::Receiver<FrameJob>,
+    (latest, cache): (&AtomicU64, &Mutex<FrameCache>),
+) {
     let design = &spec.design;
     let (mesh, bodies, scene) = (OnceCell::new(), OnceCell::new(), OnceCell::new());
     let mut sections: HashMap<usize, Option<Sections>> = HashMap::new();
@@ -297,6 +355,10 @@ fn work(spec: &Spec, queue: mpsc::Receiver<FrameJob>, latest: &AtomicU64) {
             Ok(None) => FrameReply::Superseded,
             Ok(Some(frame)) => encoded(&frame, started),
         };
+        if let FrameReply::Done(image, _) = &reply {
+            let mut cache = cache.lock().expect("the frame cache");
+            cache.put(job.request.clone(), image.clone());
+        }
         let _ = job.reply.send(reply);
     }
 }

@@ -818,9 +818,13 @@ async fn frame(State(studio): State<Arc<Studio>>, Query(q): Query<FrameQuery>) -
         return error(StatusCode::BAD_REQUEST, e);
     }
     match rev.frames.render(request).await {
-        FrameReply::Done(f) => {
-            let mut response = bytes("image/png", f.png);
+        FrameReply::Done(f, cached) => {
+            let mut response = bytes("image/png", f.png.clone());
             let h = response.headers_mut();
+            h.insert(
+                "x-frame-cache",
+                HeaderValue::from_static(if cached { "hit" } else { "miss" }),
+            );
             for (name, value) in [
                 ("x-revision", rev.number as f64),
                 ("x-fidelity", f.fidelity),
