@@ -166,3 +166,45 @@ fn the_counter_counts() {
         vec![(5, "a".to_string(), 1), (3, "b".to_string(), 6)]
     );
 }
+
+/// Every `found-<id>` a source file cites is a corpus case by its full
+/// 16-digit id, kept in `tests/design-corpus/` (or its `open/` folder), so
+/// a reader can replay it.
+#[test]
+fn cited_corpus_cases_exist() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    for dir in ["src", "tests", "benches"] {
+        rust_files(&root.join(dir), &mut files);
+    }
+    for krate in std::fs::read_dir(root.join("crates")).unwrap() {
+        rust_files(&krate.unwrap().path(), &mut files);
+    }
+    let corpus = root.join("tests/design-corpus");
+    let (mut cited, mut missing) = (0, Vec::new());
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        for (at, _) in text.match_indices("found-") {
+            let id: String = text[at + 6..]
+                .chars()
+                .take_while(char::is_ascii_hexdigit)
+                .collect();
+            if id.is_empty() {
+                continue; // prose, or a pattern such as `found-{:016x}`
+            }
+            cited += 1;
+            let name = format!("found-{id}.toml");
+            let kept = corpus.join(&name).exists() || corpus.join("open").join(&name).exists();
+            if id.len() != 16 || !kept {
+                let file = f.strip_prefix(root).unwrap().display();
+                missing.push(format!("{file}: found-{id}"));
+            }
+        }
+    }
+    assert!(cited > 50, "found only {cited} citations");
+    assert!(
+        missing.is_empty(),
+        "cited corpus cases that are not 16-digit files in tests/design-corpus:\n{}",
+        missing.join("\n")
+    );
+}

@@ -362,7 +362,7 @@ impl BaseSection<'_> {
                 let by_sag = ((sag / e).sqrt().ceil() as usize).max(1);
                 // The middle's sag is the chord error of a band of even
                 // curvature; across an inflection (a band over a bump's
-                // flank, found-1960f672) its halves cancel. The largest
+                // flank, found-1960f6721880b29e) its halves cancel. The largest
                 // curvature along the band, from second differences, bounds
                 // the error of every column.
                 const STEPS: usize = 16;

@@ -37,7 +37,7 @@ pub fn bracketed_newton(
             (hi, above) = (x, true);
         }
         // Newton can fall into a cycle across a kink of g' (a shape
-        // profile's ridge: found-3844ff35), each step moving one end of
+        // profile's ridge: found-3844ff35bfcd5d9c), each step moving one end of
         // the bracket a little. A solve still running after
         // NEWTON_PATIENCE steps whose |g| did not halve bisects.
         let stalled = i >= NEWTON_PATIENCE && gx.abs() > 0.5 * last_abs;

@@ -152,7 +152,7 @@ fn sliver_free(
     let done = simplified(SLIVER_MM)?.map(checked_half);
     // Far from the origin f32 is coarser than SLIVER_MM (its spacing is
     // 1.5e-5 mm at 150 mm): a sliver that still flips in f32 is collapsed
-    // again at a few f32 spacings of the half's extent (found-ede40982, a
+    // again at a few f32 spacings of the half's extent (found-ede40982785487f7, a
     // 297 mm wide device).
     let Some(d) = done.as_ref().filter(|d| has_slivers(d.solid.checks())) else {
         return Ok(done);

@@ -915,7 +915,7 @@ impl Site<'_> {
                 ));
             }
             // a column that starts below the runner's top and beside it
-            // opens into it (found-30761c83: a wall vent 0.08 mm beside
+            // opens into it (found-30761c8351245e78: a wall vent 0.08 mm beside
             // the gate), one channel where two were meant
             let runner_gap = runner_gap(gate, v.axis) - v.radius;
             if runner_gap < MIN_WALL_MM && v.foot_z < gate.at.z + gate.radius + MIN_WALL_MM {

@@ -690,7 +690,7 @@ fn lens_interior(
             let (p, v) = match found {
                 Some(p) => (p, v),
                 // the quadratic model's slope led astray (stations that
-                // crowd and spread within a few hq: found-b4638aa7): the
+                // crowd and spread within a few hq: found-b4638aa7d0cbda69): the
                 // chord method, its slope measured where it stalls
                 None => {
                     let what = || format!("base lens {k} at t = {t}, y = {y}");

@@ -476,7 +476,7 @@ impl<'a> Planner<'a> {
                 let dv = if c < 1e-6 * b * b {
                     // nearly no pure curvature beside the twist: the form
                     // below would cancel (to Δv = 0 where kvv is 1e-19,
-                    // found-43f707a1); this one does not
+                    // found-43f707a12508b8cb); this one does not
                     8.0 * e_along / (b + (b * b + c).sqrt())
                 } else if kvv > 0.0 {
                     (-b + (b * b + 8.0 * kvv * e_along).sqrt()) / kvv
@@ -778,7 +778,7 @@ impl<'a> Planner<'a> {
             let [(va, pa), (_, pb), (vc, pc)] = [w[0], w[1], w[2]];
             let (sa, sb, sc) = (pa.x - wall, pb.x - wall, pc.x - wall);
             // (the middle one may lie in the snap band on the other side:
-            // found-d40d1b62, a crease dipping 5e-5 mm past the wall)
+            // found-d40d1b6250ce1ad8, a crease dipping 5e-5 mm past the wall)
             let one_side =
                 (sa > 0.0) == (sc > 0.0) && ((sb > 0.0) == (sa > 0.0) || sb.abs() <= WALL_SNAP_MM);
             // a local minimum of the distance, near the wall, between

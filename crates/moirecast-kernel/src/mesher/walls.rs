@@ -139,7 +139,7 @@ pub(super) fn folds(dm: &DeviceMesh, strip: &Strip) -> Vec<f64> {
 /// stretched where the profile's slope nearly cancels the period, leaves
 /// the wall's base row without a vertex for tens of millimetres, and the
 /// zip fans the revealer's wavy edge from its far end, folded
-/// (found-9b9a24a4: 13 lenses fanned from a corner 32 mm away). For
+/// (found-9b9a24a46a9dbb23: 13 lenses fanned from a corner 32 mm away). For
 /// every such triangle, its side and the x where the base edge needs a
 /// vertex: under its revealer edge, or between its two base vertices.
 pub(super) fn sparse_bottoms(dm: &DeviceMesh, strip: &Strip) -> Vec<(Side, f64)> {
