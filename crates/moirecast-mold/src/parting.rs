@@ -176,7 +176,8 @@ impl PosedDevice {
             })
             .collect();
         let mut patches = device.patches.clone();
-        let levels = split_walls(&mut mesh, &mut faces, &mut patches)?;
+        let smoothing = PARTING_SMOOTHING_PERIODS * design.params.period * scale;
+        let levels = split_walls(&mut mesh, (&mut faces, &mut patches), smoothing)?;
         // The exact outline, posed (vertices lie on it to the wall snap).
         let (a, b) = (
             posed.apply(DVec3::new(ox0, -hh, 0.0)),
@@ -208,16 +209,72 @@ impl PosedDevice {
     }
 }
 
-/// Splits every wall triangle at the midpoints of its two rungs (its edges
-/// from the wall's top edge to its bottom edge): three triangles, wound as
-/// the one they replace. Neighbours share a rung, so the split conforms, and
-/// the midpoints, in order along a wall, are the mid-wall curve. `faces`
-/// and `patches` (per triangle) follow. Returns each vertex's level.
+/// The width (σ, in lens periods) of the Gaussian that smooths the
+/// parting line along each wall.
+const PARTING_SMOOTHING_PERIODS: f64 = 2.0;
+/// Where on a rung the parting line may cross it, at the most: a rung's
+/// share from either end (where the smooth height leaves the wall).
+const RUNG_SHARE: (f64, f64) = (0.2, 0.8);
+
+/// Splits every wall triangle where the parting line crosses its two rungs
+/// (its edges from the wall's top edge to its bottom edge): three
+/// triangles, wound as the one they replace. Neighbours share a rung, so
+/// the split conforms, and the crossings, in order along a wall, are the
+/// mid-wall curve. The parting line is smooth: on each wall, the rungs'
+/// midpoints' heights averaged along the wall by a Gaussian of σ =
+/// `smoothing` (mm). The midpoints themselves zigzag from rung to rung
+/// (0.025 mm on `plane-rings`), and a skirt through such a line has a knee
+/// at every rung, which OpenCascade's mesher refines without end (holes in
+/// the STEP halves at 0.005-0.01 mm). `faces` and `patches` (per
+/// triangle) follow. Returns each vertex's level.
 fn split_walls(
     mesh: &mut Mesh,
-    faces: &mut Vec<Face>,
-    patches: &mut Vec<Patch>,
+    (faces, patches): (&mut Vec<Face>, &mut Vec<Patch>),
+    smoothing: f64,
 ) -> Result<Vec<Level>> {
+    let mut levels = vertex_levels(mesh, faces)?;
+    let rungs = wall_rungs(mesh, faces, &levels)?;
+    let heights = parting_heights(mesh, faces, &rungs, smoothing);
+    let mut mid_of: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut mid = |mesh: &mut Mesh, levels: &mut Vec<Level>, wall: Wall, a: u32, b: u32| -> u32 {
+        *mid_of.entry((a.min(b), a.max(b))).or_insert_with(|| {
+            let (pa, pb) = (mesh.positions[a as usize], mesh.positions[b as usize]);
+            let p = crate::boolean::f32_exact(rung_crossing(&heights[&wall], pa, pb, wall));
+            mesh.positions.push(p);
+            levels.push(Level::Mid);
+            (mesh.positions.len() - 1) as u32
+        })
+    };
+    let (old_tris, old_faces) = (std::mem::take(&mut mesh.triangles), std::mem::take(faces));
+    let old_patches = std::mem::take(patches);
+    for (((t, face), patch), rung) in old_tris
+        .into_iter()
+        .zip(old_faces)
+        .zip(old_patches)
+        .zip(rungs)
+    {
+        let (Face::Wall(wall), Some((p, q, x))) = (face, rung) else {
+            mesh.triangles.push(t);
+            faces.push(face);
+            patches.push(patch);
+            continue;
+        };
+        let (mp, mq) = (
+            mid(mesh, &mut levels, wall, p, x),
+            mid(mesh, &mut levels, wall, q, x),
+        );
+        for tri in [[p, q, mq], [p, mq, mp], [mp, mq, x]] {
+            mesh.triangles.push(tri);
+            faces.push(face);
+            patches.push(patch);
+        }
+    }
+    Ok(levels)
+}
+
+/// Each vertex's level: on an upper or a lower lens face (the walls' top
+/// and bottom edges are both), never both.
+fn vertex_levels(mesh: &Mesh, faces: &[Face]) -> Result<Vec<Level>> {
     let n = mesh.positions.len();
     let (mut on_upper, mut on_lower) = (vec![false; n], vec![false; n]);
     for (t, face) in mesh.triangles.iter().zip(faces.iter()) {
@@ -230,62 +287,127 @@ fn split_walls(
             flags[v as usize] = true;
         }
     }
-    let mut levels = Vec::with_capacity(n);
-    for v in 0..n {
-        levels.push(match (on_upper[v], on_lower[v]) {
-            (true, false) => Level::Upper,
-            (false, true) => Level::Lower,
-            _ => {
-                return Err(MoldError::NotSolid {
-                    what: "device walls",
-                    detail: format!(
-                        "vertex {v} at {} is on {} lens faces",
-                        mesh.positions[v],
-                        if on_upper[v] { "both" } else { "no" }
-                    ),
-                })
-            }
-        });
-    }
-    let mut mid_of: HashMap<(u32, u32), u32> = HashMap::new();
-    let mut mid = |mesh: &mut Mesh, levels: &mut Vec<Level>, a: u32, b: u32| -> u32 {
-        *mid_of.entry((a.min(b), a.max(b))).or_insert_with(|| {
-            let p = 0.5 * (mesh.positions[a as usize] + mesh.positions[b as usize]);
-            mesh.positions.push(crate::boolean::f32_exact(p));
-            levels.push(Level::Mid);
-            (mesh.positions.len() - 1) as u32
-        })
-    };
-    let (old_tris, old_faces) = (std::mem::take(&mut mesh.triangles), std::mem::take(faces));
-    let old_patches = std::mem::take(patches);
-    for ((t, face), patch) in old_tris.into_iter().zip(old_faces).zip(old_patches) {
-        if !matches!(face, Face::Wall(_)) {
-            mesh.triangles.push(t);
-            faces.push(face);
-            patches.push(patch);
-            continue;
-        }
-        // rotate to (p, q, x): p and q on one edge, x on the other
-        let level = |k: usize| levels[t[k] as usize];
-        let Some(k) = (0..3)
-            .find(|&k| level((k + 1) % 3) == level((k + 2) % 3) && level(k) != level((k + 1) % 3))
-        else {
-            return Err(MoldError::NotSolid {
+    (0..n)
+        .map(|v| match (on_upper[v], on_lower[v]) {
+            (true, false) => Ok(Level::Upper),
+            (false, true) => Ok(Level::Lower),
+            _ => Err(MoldError::NotSolid {
                 what: "device walls",
                 detail: format!(
-                    "wall triangle {t:?} does not span from the top edge to the bottom edge"
+                    "vertex {v} at {} is on {} lens faces",
+                    mesh.positions[v],
+                    if on_upper[v] { "both" } else { "no" }
                 ),
-            });
+            }),
+        })
+        .collect()
+}
+
+/// Per triangle, for a wall triangle, (p, q, x) in its winding: p and q on
+/// one edge of the wall, x on the other; (p, x) and (q, x) are its rungs.
+type Rungs = Vec<Option<(u32, u32, u32)>>;
+
+fn wall_rungs(mesh: &Mesh, faces: &[Face], levels: &[Level]) -> Result<Rungs> {
+    mesh.triangles
+        .iter()
+        .zip(faces)
+        .map(|(t, face)| {
+            if !matches!(face, Face::Wall(_)) {
+                return Ok(None);
+            }
+            let level = |k: usize| levels[t[k] as usize];
+            let k = (0..3)
+                .find(|&k| {
+                    level((k + 1) % 3) == level((k + 2) % 3) && level(k) != level((k + 1) % 3)
+                })
+                .ok_or_else(|| MoldError::NotSolid {
+                    what: "device walls",
+                    detail: format!(
+                        "wall triangle {t:?} does not span from the top edge to the bottom edge"
+                    ),
+                })?;
+            Ok(Some((t[(k + 1) % 3], t[(k + 2) % 3], t[k])))
+        })
+        .collect()
+}
+
+/// Each wall's parting height along it: its rungs' midpoints (along, z),
+/// sorted, and the Gaussian σ that smooths them.
+struct PartingHeights {
+    samples: Vec<(f64, f64)>,
+    sigma: f64,
+}
+
+impl PartingHeights {
+    /// The smoothed height at along-coordinate `t`: the Gaussian-weighted
+    /// mean of the samples within 3σ (the nearest sample's alone if none
+    /// is).
+    fn at(&self, t: f64) -> f64 {
+        let reach = 3.0 * self.sigma;
+        let lo = self.samples.partition_point(|s| s.0 < t - reach);
+        let hi = self.samples.partition_point(|s| s.0 <= t + reach);
+        let (mut sum, mut weight) = (0.0, 0.0);
+        for &(a, z) in &self.samples[lo..hi] {
+            let w = (-0.5 * ((a - t) / self.sigma).powi(2)).exp();
+            sum += w * z;
+            weight += w;
+        }
+        if weight > 0.0 {
+            return sum / weight;
+        }
+        let near = lo.min(self.samples.len() - 1);
+        self.samples[near].1
+    }
+}
+
+/// A wall's rung midpoints (along, z), keyed by the rung's two vertices so
+/// that a rung shared by two triangles counts once.
+type RungMidpoints = HashMap<(u32, u32), (f64, f64)>;
+
+fn parting_heights(
+    mesh: &Mesh,
+    faces: &[Face],
+    rungs: &Rungs,
+    sigma: f64,
+) -> HashMap<Wall, PartingHeights> {
+    let mut samples: HashMap<Wall, RungMidpoints> = HashMap::new();
+    for (rung, face) in rungs.iter().zip(faces) {
+        let (Some((p, q, x)), Face::Wall(wall)) = (*rung, *face) else {
+            continue;
         };
-        let (p, q, x) = (t[(k + 1) % 3], t[(k + 2) % 3], t[k]);
-        let (mp, mq) = (mid(mesh, &mut levels, p, x), mid(mesh, &mut levels, q, x));
-        for tri in [[p, q, mq], [p, mq, mp], [mp, mq, x]] {
-            mesh.triangles.push(tri);
-            faces.push(face);
-            patches.push(patch);
+        for a in [p, q] {
+            let m = 0.5 * (mesh.positions[a as usize] + mesh.positions[x as usize]);
+            samples
+                .entry(wall)
+                .or_default()
+                .insert((a.min(x), a.max(x)), (wall.along(m), m.z));
         }
     }
-    Ok(levels)
+    samples
+        .into_iter()
+        .map(|(wall, by_rung)| {
+            let mut samples: Vec<(f64, f64)> = by_rung.into_values().collect();
+            samples.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+            (wall, PartingHeights { samples, sigma })
+        })
+        .collect()
+}
+
+/// Where the parting line crosses the rung from `a` to `b` of `wall`: the
+/// point whose height is the wall's smoothed height at its own
+/// along-coordinate (a few fixed-point steps: a rung rises far more than
+/// it runs along), within [`RUNG_SHARE`] of the rung from its ends.
+fn rung_crossing(heights: &PartingHeights, a: DVec3, b: DVec3, wall: Wall) -> DVec3 {
+    let rise = b.z - a.z;
+    if rise == 0.0 {
+        return 0.5 * (a + b);
+    }
+    let mut s = 0.5;
+    for _ in 0..4 {
+        let p = a + s * (b - a);
+        s = ((heights.at(wall.along(p)) - a.z) / rise).clamp(RUNG_SHARE.0, RUNG_SHARE.1);
+    }
+    a + s * (b - a)
 }
 
 /// The map from the design frame to the mold frame: a turn of 180° about
