@@ -186,6 +186,50 @@ fn every_endpoint_answers() {
     assert_eq!(studio.get("/nothing-here").status, 404);
 }
 
+/// The form's edits (PATCH) change the spec's own text: a user's comment,
+/// spacing and `40.0` survive an edit and a save, values that need each
+/// other (a formula surface and its z) go in together, and a refused
+/// edit leaves the text as it was.
+#[test]
+fn form_edits_keep_the_users_text_and_take_linked_values() {
+    let commented = SMALL
+        .replace("radius = 40.0", "radius = 40.0   # mm, my saddle")
+        .replace("[layout]", "# my notes\n[layout]");
+    let studio = Studio::start("edits", &commented);
+    let patch = |body: &str| {
+        http::request_with(
+            studio.port,
+            &format!("127.0.0.1:{}", studio.port),
+            "PATCH",
+            "/api/spec",
+            &[("Content-Type", "application/json")],
+            body.as_bytes(),
+        )
+    };
+    let r = patch(r#"{"edits": [{"key": "base.levels", "value": 2}]}"#);
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(r.json()["values"]["base"]["levels"], 2.0);
+    assert_eq!(studio.request("POST", "/api/save", b"").status, 200);
+    let saved = std::fs::read_to_string(studio.dir.join("design.toml")).unwrap();
+    assert_eq!(saved, commented.replace("levels = 1.0", "levels = 2.0"));
+
+    let formula = r#"{"edits": [{"key": "surface.kind", "value": "formula"},
+        {"key": "surface.z", "value": "(x*x - y*y)/80"}, {"key": "surface.radius", "value": null}]}"#;
+    let r = patch(formula);
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    let text = String::from_utf8(studio.get("/api/spec").body).unwrap();
+    assert!(
+        text.contains("kind = \"formula\"") && text.contains("# my notes"),
+        "{text}"
+    );
+
+    let refused = patch(r#"{"edits": [{"key": "lens.afov", "value": 200}]}"#);
+    assert_eq!(refused.status, 422);
+    assert_eq!(studio.get("/api/spec").body, text.as_bytes());
+    let not_a_value = patch(r#"{"edits": [{"key": "lens.afov", "value": [1]}]}"#);
+    assert_eq!(not_a_value.status, 400);
+}
+
 #[test]
 fn a_bad_spec_is_refused_by_key_and_the_last_good_design_stays() {
     let studio = Studio::start("refusals", SMALL);

@@ -113,6 +113,14 @@ fn writes_from_another_site_are_refused() {
             ],
         ),
         ("PUT", "/api/spec", vec![("Origin", "null")]),
+        (
+            "PATCH",
+            "/api/spec",
+            vec![
+                ("Origin", "http://evil.example"),
+                ("Content-Type", "application/json"),
+            ],
+        ),
         ("POST", "/api/save", vec![("Sec-Fetch-Site", "cross-site")]),
         (
             "POST",

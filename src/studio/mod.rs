@@ -410,7 +410,7 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
         .route("/studio.css", get(style))
         .route("/api/keys", get(keys))
         .route("/api/state", get(state))
-        .route("/api/spec", get(get_spec).put(put_spec))
+        .route("/api/spec", get(get_spec).put(put_spec).patch(patch_spec))
         .route("/api/save", post(save))
         .route("/api/profiles", get(profiles))
         .route("/api/frame.png", get(frame))
@@ -673,6 +673,60 @@ async fn get_spec(State(studio): State<Arc<Studio>>) -> Response {
 /// A new spec: 200 with the new state, or 422 with the errors (and the
 /// last good revision kept).
 async fn put_spec(State(studio): State<Arc<Studio>>, text: String) -> Response {
+    install(studio, text).await
+}
+
+/// The form's edits: `{"edits": [{"key": "table.name", "value": v}]}`, v a
+/// boolean, number or string, or null to remove the key.
+#[derive(Deserialize)]
+struct SpecEdits {
+    edits: Vec<KeyEdit>,
+}
+
+#[derive(Deserialize)]
+struct KeyEdit {
+    key: String,
+    value: Option<serde_json::Value>,
+}
+
+/// Edits applied together to the current spec's text, which keeps its
+/// comments, order and number formatting ([`moirecast_spec::apply_edits`]),
+/// then installed as [`put_spec`] does: 200 with the new state, 422 with
+/// the errors, 400 for a value that is no boolean, number or string.
+async fn patch_spec(State(studio): State<Arc<Studio>>, Json(body): Json<SpecEdits>) -> Response {
+    use moirecast_spec::{EditValue, SpecEdit};
+    let mut edits = Vec::with_capacity(body.edits.len());
+    for KeyEdit { key, value } in body.edits {
+        let value = match value {
+            None | Some(serde_json::Value::Null) => None,
+            Some(serde_json::Value::Bool(b)) => Some(EditValue::Bool(b)),
+            Some(serde_json::Value::String(t)) => Some(EditValue::Text(t)),
+            Some(serde_json::Value::Number(n)) => match n.as_f64() {
+                Some(x) => Some(EditValue::Number(x)),
+                None => {
+                    return error(
+                        StatusCode::BAD_REQUEST,
+                        format!("`{key}`: {n} is no number"),
+                    )
+                }
+            },
+            Some(other) => {
+                return error(
+                    StatusCode::BAD_REQUEST,
+                    format!("`{key}`: a boolean, number, string or null, not {other}"),
+                )
+            }
+        };
+        edits.push(SpecEdit { key, value });
+    }
+    match moirecast_spec::apply_edits(&studio.current().text, &edits) {
+        Ok(text) => install(studio, text).await,
+        Err(e) => error(StatusCode::BAD_REQUEST, e.to_string()),
+    }
+}
+
+/// Parses `text` and, if it is a design, makes it the current revision.
+async fn install(studio: Arc<Studio>, text: String) -> Response {
     let parsed = {
         let (studio, text) = (studio.clone(), text.clone());
         blocking(move || studio.parse(&text)).await

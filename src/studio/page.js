@@ -12,25 +12,6 @@ async function api(path, options) {
 
 // ---- spec form -------------------------------------------------------------
 
-function tomlValue(v) {
-  if (typeof v === "boolean") return v ? "true" : "false";
-  if (typeof v === "number") return Number.isFinite(v) ? String(v) : JSON.stringify(String(v));
-  return JSON.stringify(v);
-}
-
-function toToml(values) {
-  let out = "";
-  for (const [table, entries] of Object.entries(values)) {
-    if (typeof entries !== "object" || entries === null) continue;
-    const keys = Object.entries(entries);
-    if (!keys.length) continue;
-    out += `[${table}]\n`;
-    for (const [k, v] of keys) out += `${k} = ${tomlValue(v)}\n`;
-    out += "\n";
-  }
-  return out;
-}
-
 function fieldValue(key) {
   const [t, k] = key.split(".");
   return studio.values[t] ? studio.values[t][k] : undefined;
@@ -141,21 +122,26 @@ function showErrors(errors) {
   setStatus(`refused: ${errors.map((e) => e.key || "TOML").join(", ")} (the last good design stays)`);
 }
 
+// A field's edit goes to the server as an edit of the spec's own text,
+// which keeps the user's comments, order and number formatting.
 function edit(doc, text) {
-  const [t, k] = doc.key.split(".");
-  const values = JSON.parse(JSON.stringify(studio.values));
-  values[t] = values[t] || {};
   const v = parseField(doc, text);
-  if (v === undefined) delete values[t][k]; else values[t][k] = v;
-  if (doc.key === "profile.image" && v !== undefined) {
-    values.profile.kind = "image";
-  }
-  putSpec(toToml(values));
+  const edits = [{ key: doc.key, value: v === undefined ? null : v }];
+  if (doc.key === "profile.image" && v !== undefined) edits.push({ key: "profile.kind", value: "image" });
+  patchSpec(edits);
 }
 
-async function putSpec(text) {
+function patchSpec(edits) {
+  return sendSpec({ method: "PATCH", body: JSON.stringify({ edits }), headers: { "content-type": "application/json" } });
+}
+
+function putSpec(text) {
+  return sendSpec({ method: "PUT", body: text, headers: { "content-type": "application/toml" } });
+}
+
+async function sendSpec(request) {
   setStatus("checking the spec…");
-  const response = await api("/api/spec", { method: "PUT", body: text, headers: { "content-type": "application/toml" } });
+  const response = await api("/api/spec", request);
   const body = await response.json().catch(() => ({}));
   if (response.status === 422) { showErrors(body.errors || []); return false; }
   if (!response.ok) { $("spec-error").textContent = body.error || `HTTP ${response.status}`; return false; }
@@ -194,8 +180,8 @@ function showView() {
   $("view-note").textContent = tilt || along ? `tilt 0 is the design view (${tilt}°, ${along}° along)` : "tilt 0 is the design view (straight down)";
 }
 $("compensate").addEventListener("change", () => {
-  const doc = studio.keys.find((d) => d.key === "view.compensate");
-  if (doc) edit(doc, $("compensate").checked ? "true" : "false");
+  // ticked is the default: the key goes, and the spec reads as it did
+  patchSpec([{ key: "view.compensate", value: $("compensate").checked ? null : false }]);
 });
 
 // While a slider moves, frames use 9 lens phases per pixel (samples=3,
@@ -316,11 +302,10 @@ $("run-explore").addEventListener("click", async () => {
 });
 
 function adopt(cell) {
-  const values = JSON.parse(JSON.stringify(studio.values));
-  values.base = values.base || {};
-  values.base.a = cell.a;
-  values.base.d = Number(cell.d_mm.toFixed(6));
-  putSpec(toToml(values));
+  patchSpec([
+    { key: "base.a", value: cell.a },
+    { key: "base.d", value: Number(cell.d_mm.toFixed(6)) },
+  ]);
 }
 
 // ---- 3D view ---------------------------------------------------------------

@@ -30,7 +30,9 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
+mod edit;
 mod keys;
+pub use edit::{apply_edits, EditError, EditValue, SpecEdit};
 pub use keys::{defaults_help, keys, spec_markdown, KeyDoc, ValueKind};
 
 /// The reference design (`molds/saddle-horse.toml`), built when no spec is given.
