@@ -1030,7 +1030,7 @@ async fn write(State(studio): State<Arc<Studio>>, Query(q): Query<WriteQuery>) -
             .send(json!({"kind": "start", "what": what, "revision": rev.number}).to_string());
         let result = if mold {
             crate::run_mold(&rev.spec, &studio.out, false, &progress)
-                .map(|o| (o.written, o.bytes, o.warnings))
+                .map(|o| (o.written, o.bytes, o.warnings, Some(o.casting)))
         } else {
             crate::run_device(
                 &rev.spec,
@@ -1039,15 +1039,17 @@ async fn write(State(studio): State<Arc<Studio>>, Query(q): Query<WriteQuery>) -
                 crate::Mesher::Direct,
                 &progress,
             )
-            .map(|o| (o.written, o.bytes, Vec::new()))
+            .map(|o| (o.written, o.bytes, Vec::new(), None))
         };
         let event = match result {
-            Ok((written, bytes, warnings)) => json!({
+            Ok((written, bytes, warnings, casting)) => json!({
                 "kind": "done",
                 "what": what,
                 "written": written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
                 "bytes": bytes,
                 "warnings": warnings,
+                // what to weigh out, as `moirecast mold` prints it
+                "casting": casting,
             }),
             Err(e) => json!({
                 "kind": "error",

@@ -464,13 +464,15 @@ function listenForEvents() {
   const events = new EventSource("/api/events");
   events.onmessage = (message) => {
     const e = JSON.parse(message.data);
-    if (e.kind === "start") { $("write-error").textContent = ""; $("written").textContent = ""; $("write-stage").textContent = `writing the ${e.what}…`; }
+    if (e.kind === "start") { $("write-error").textContent = ""; $("written").textContent = ""; $("casting").textContent = ""; $("write-stage").textContent = `writing the ${e.what}…`; }
     if (e.kind === "stage") { stageTotal = Math.max(1, e.total); stageDone = 0; $("write-stage").textContent = e.name; $("write-progress").max = stageTotal; $("write-progress").value = 0; }
     if (e.kind === "tick") { stageDone += e.n; $("write-progress").value = stageDone; }
     if (e.kind === "done") {
       $("write-stage").textContent = `done: ${(e.bytes / 1e6).toFixed(1)} MB`;
       $("write-progress").value = $("write-progress").max;
       $("written").textContent = e.written.map((w) => "wrote " + w).join("\n") + e.warnings.map((w) => "\nwarning: " + w).join("");
+      // the mold's casting numbers: fill (mL), grams, the mix and its parts
+      if (e.casting) $("casting").textContent = e.casting.replace(/^casting: /, "To cast: ");
       setButtons(false);
       if (e.what === "mold") loadReport();
     }

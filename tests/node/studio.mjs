@@ -8,7 +8,8 @@
 // the first frame arrives; the tilt slider changes the frame; the view
 // compensation toggles; afov = 200
 // is refused at its field, naming `lens.afov`; the 3D view orbits;
-// "Write device files" writes device.stl into the output folder; an edit
+// "Write device files" writes device.stl into the output folder; "Write
+// mold" writes the halves and shows the casting numbers; an edit
 // saved keeps the spec's comments and changes only its line. Saves a
 // screenshot of the page. Exits non-zero, saying why, on any failure.
 
@@ -105,6 +106,13 @@ try {
   await page.locator("#write-device").click();
   await page.waitForFunction(() => document.getElementById("written").textContent.includes("device.stl"), null, { timeout: 120000 });
   check(existsSync(join(out, "device.stl")), `device.stl is written into ${out}`);
+
+  // "Write mold" writes the halves and shows what to weigh out
+  await page.locator("#write-mold").click();
+  await page.waitForFunction(() => document.getElementById("casting").textContent.length > 0, null, { timeout: 300000 });
+  const casting = await page.locator("#casting").textContent();
+  check(existsSync(join(out, "mold-top.stl")) && /fill [0-9.]+ mL/.test(casting) && /mix [0-9.]+ g/.test(casting) && casting.includes("sylgard"),
+    `the mold is written and its casting numbers show: ${JSON.stringify(casting)}`);
 
   // an edit, then "Save spec": the spec file keeps its comments, spacing
   // and number formatting, and only the edited line changes
