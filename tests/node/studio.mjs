@@ -10,8 +10,8 @@
 // is refused at its field, naming `lens.afov`; the 3D view orbits;
 // "Write device files" writes device.stl into the output folder; "Write
 // mold" writes the halves and shows the casting numbers; an edit
-// saved keeps the spec's comments and changes only its line. Saves a
-// screenshot of the page. Exits non-zero, saying why, on any failure.
+// saved keeps the spec's comments and changes only its line; at 390 px the
+// page scrolls only down. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
 
 import { existsSync, readFileSync } from "node:fs";
 import { join } from "node:path";
@@ -130,6 +130,16 @@ try {
 
   await page.screenshot({ path: screenshot, fullPage: true });
   console.log(`screenshot: ${screenshot}`);
+
+  // a phone, 390 px wide: the page scrolls only down, the moiré first
+  const phone = await browser.newPage({ viewport: { width: 390, height: 844 } });
+  await phone.goto(url);
+  await phone.waitForFunction(() => window.studio && window.studio.frames >= 1, null, { timeout: 60000 });
+  const widths = await phone.evaluate(() => [document.documentElement.scrollWidth, document.documentElement.clientWidth]);
+  check(widths[0] <= widths[1], `no sideways scrolling at 390 px (content ${widths[0]} px in ${widths[1]})`);
+  const narrow = screenshot.replace(/\.png$/, "-390.png");
+  await phone.screenshot({ path: narrow, fullPage: false });
+  console.log(`screenshot: ${narrow}`);
 } catch (e) {
   check(false, String(e));
 } finally {
