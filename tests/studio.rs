@@ -188,8 +188,8 @@ fn every_endpoint_answers() {
 
 /// The form's edits (PATCH) change the spec's own text: a user's comment,
 /// spacing and `40.0` survive an edit and a save, values that need each
-/// other (a formula surface and its z) go in together, and a refused
-/// edit leaves the text as it was.
+/// other (a formula surface and its z) go in together, a refused edit
+/// leaves the text as it was, and a non-number is refused at its key.
 #[test]
 fn form_edits_keep_the_users_text_and_take_linked_values() {
     let commented = SMALL
@@ -228,6 +228,21 @@ fn form_edits_keep_the_users_text_and_take_linked_values() {
     assert_eq!(studio.get("/api/spec").body, text.as_bytes());
     let not_a_value = patch(r#"{"edits": [{"key": "lens.afov", "value": [1]}]}"#);
     assert_eq!(not_a_value.status, 400);
+    // a non-number is named at its key, not as a TOML line and column
+    for typed in ["abc", "0,5"] {
+        let r = patch(&format!(
+            r#"{{"edits": [{{"key": "layout.period", "value": "{typed}"}}]}}"#
+        ));
+        assert_eq!(r.status, 422);
+        let error = &r.json()["errors"][0];
+        assert_eq!(error["key"], "layout.period");
+        assert_eq!(error["value"], typed);
+        assert!(
+            error["fix"].as_str().unwrap().contains("0.5, not 0,5"),
+            "{error}"
+        );
+    }
+    assert_eq!(studio.get("/api/spec").body, text.as_bytes());
 }
 
 #[test]

@@ -719,10 +719,53 @@ async fn patch_spec(State(studio): State<Arc<Studio>>, Json(body): Json<SpecEdit
         };
         edits.push(SpecEdit { key, value });
     }
+    let misfits: Vec<serde_json::Value> = edits.iter().filter_map(edit_misfit).collect();
+    if !misfits.is_empty() {
+        return (
+            StatusCode::UNPROCESSABLE_ENTITY,
+            Json(json!({"errors": misfits, "revision": studio.current().number})),
+        )
+            .into_response();
+    }
     match moirecast_spec::apply_edits(&studio.current().text, &edits) {
         Ok(text) => install(studio, text).await,
         Err(e) => error(StatusCode::BAD_REQUEST, e.to_string()),
     }
+}
+
+/// An edit whose value is not of its key's kind, as an error at that key:
+/// text for a number ("abc", "0,5"), a number for a boolean. Named at the
+/// field, where the spec's own parser would only point at a TOML line.
+fn edit_misfit(edit: &moirecast_spec::SpecEdit) -> Option<serde_json::Value> {
+    use moirecast_spec::{EditValue, ValueKind};
+    let doc = moirecast_spec::keys()
+        .into_iter()
+        .find(|d| d.key == edit.key)?;
+    let unit = if doc.unit.is_empty() {
+        String::new()
+    } else {
+        format!(" in {}", doc.unit)
+    };
+    let (value, problem, fix) = match (&doc.kind, edit.value.as_ref()?) {
+        (ValueKind::Number, EditValue::Text(t)) => (
+            t.clone(),
+            "is not a number".to_string(),
+            format!("write a number{unit}, with a decimal point (0.5, not 0,5)"),
+        ),
+        (ValueKind::Distance, EditValue::Text(t)) if t != "focal" => (
+            t.clone(),
+            "is neither a number nor \"focal\"".to_string(),
+            format!("write a number{unit}, or focal"),
+        ),
+        (ValueKind::Bool, EditValue::Number(x)) => (
+            x.to_string(),
+            "is not true or false".to_string(),
+            "tick or untick it".to_string(),
+        ),
+        _ => return None,
+    };
+    let cli = format!("`{}` = {value:?}: {problem}.\n  Fix: {fix}", edit.key);
+    Some(json!({"key": edit.key, "value": value, "message": problem, "fix": fix, "cli": cli}))
 }
 
 /// Parses `text` and, if it is a design, makes it the current revision.
