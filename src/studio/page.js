@@ -99,25 +99,51 @@ function parseField(doc, text) {
   return text;
 }
 
+// The draft: values the user typed that the last good design does not
+// take. Each stays in its field, marked, until an edit of that key builds;
+// the banner says which revision is on screen and what differs from it.
+studio.refused = new Map(); // key → { text, message }
+
 function clearErrors() {
   for (const f of document.querySelectorAll(".field.invalid")) f.classList.remove("invalid");
   for (const e of document.querySelectorAll(".field .error")) e.textContent = "";
   $("spec-error").textContent = "";
 }
 
-function showErrors(errors) {
+function inputOf(key) { return $("f-" + key.replace(".", "-")); }
+
+function showDraft() {
   clearErrors();
+  for (const [key, { text, message }] of studio.refused) {
+    const field = document.querySelector(`.field[data-key="${key}"]`);
+    if (!field) continue;
+    field.classList.add("invalid");
+    const doc = studio.keys.find((d) => d.key === key);
+    field.querySelector(".error").textContent = message + (doc ? `\n  Range: ${doc.range}${doc.unit ? " " + doc.unit : ""}` : "");
+    const input = inputOf(key);
+    if (input && text !== undefined) input.value = text;
+  }
+  const keys = [...studio.refused.keys()];
+  $("draft").hidden = keys.length === 0;
+  $("draft").textContent = keys.length
+    ? `showing revision ${studio.revision}, the last design that built; not applied: ${keys.map((k) => `${k} = ${studio.refused.get(k).text}`).join(", ")}`
+    : "";
+}
+
+function showErrors(errors) {
+  for (const e of errors) {
+    const text = e.cli || e.message;
+    if (e.key && document.querySelector(`.field[data-key="${e.key}"]`)) {
+      const input = inputOf(e.key);
+      studio.refused.set(e.key, { text: input ? input.value : undefined, message: text });
+    }
+  }
+  showDraft();
+  const unplaced = errors.filter((e) => !e.key || !document.querySelector(`.field[data-key="${e.key}"]`));
+  if (unplaced.length) $("spec-error").textContent = unplaced.map((e) => e.cli || e.message).join("\n");
   for (const e of errors) {
     const field = e.key && document.querySelector(`.field[data-key="${e.key}"]`);
-    const text = e.cli || e.message;
-    if (field) {
-      field.classList.add("invalid");
-      const doc = studio.keys.find((d) => d.key === e.key);
-      field.querySelector(".error").textContent = text + (doc ? `\n  Range: ${doc.range}${doc.unit ? " " + doc.unit : ""}` : "");
-      field.scrollIntoView({ block: "nearest" });
-    } else {
-      $("spec-error").textContent = text;
-    }
+    if (field) { field.scrollIntoView({ block: "nearest" }); break; }
   }
   setStatus(`refused: ${errors.map((e) => e.key || "TOML").join(", ")} (the last good design stays)`);
 }
@@ -132,20 +158,24 @@ function edit(doc, text) {
 }
 
 function patchSpec(edits) {
-  return sendSpec({ method: "PATCH", body: JSON.stringify({ edits }), headers: { "content-type": "application/json" } });
+  const request = { method: "PATCH", body: JSON.stringify({ edits }), headers: { "content-type": "application/json" } };
+  return sendSpec(request, edits.map((e) => e.key));
 }
 
+// The whole TOML replaces the draft.
 function putSpec(text) {
-  return sendSpec({ method: "PUT", body: text, headers: { "content-type": "application/toml" } });
+  return sendSpec({ method: "PUT", body: text, headers: { "content-type": "application/toml" } }, null);
 }
 
-async function sendSpec(request) {
+// `keys`: the keys the request edits (null: all of them), which leave the
+// draft once it builds.
+async function sendSpec(request, keys) {
   setStatus("checking the spec…");
   const response = await api("/api/spec", request);
   const body = await response.json().catch(() => ({}));
   if (response.status === 422) { showErrors(body.errors || []); return false; }
   if (!response.ok) { $("spec-error").textContent = body.error || `HTTP ${response.status}`; return false; }
-  clearErrors();
+  if (keys === null) studio.refused.clear(); else for (const k of keys) studio.refused.delete(k);
   applyState(body);
   return true;
 }
@@ -160,6 +190,7 @@ function applyState(state) {
   $("spec-file").textContent = state.spec_file;
   $("out-dir").textContent = `into ${state.out}`;
   fillForm();
+  showDraft();
   showView();
   showLightPickers();
   const d = state.derived;

@@ -7,7 +7,8 @@
 // `moirecast studio` on a free port, and checks what a designer does:
 // the first frame arrives; the tilt slider changes the frame; the view
 // compensation toggles; afov = 200
-// is refused at its field, naming `lens.afov`; the 3D view orbits;
+// is refused at its field, naming `lens.afov`, and stays marked through
+// the next edit, with a banner naming the revision shown; the 3D view orbits;
 // "Write device files" writes device.stl into the output folder; "Write
 // mold" writes the halves and shows the casting numbers; an edit
 // saved keeps the spec's comments and changes only its line; at 390 px the
@@ -88,6 +89,20 @@ try {
   const state = await (await page.request.get(url + "api/state")).json();
   check(state.values.lens.afov === 60, "the last good design stays (lens.afov = 60)");
 
+  // the refused value stays in its field, marked, through the next edit
+  // that builds, and the banner names the revision on screen and the key
+  const refusedAt = await page.evaluate(() => window.studio.revision);
+  await page.locator("#f-base-levels").fill("1.00");
+  await page.locator("#f-base-levels").press("Tab");
+  await page.waitForFunction(([r]) => window.studio.revision > r, [refusedAt], { timeout: 60000 });
+  const marked = await page.evaluate(() => ({
+    value: document.getElementById("f-lens-afov").value,
+    invalid: document.querySelector('.field[data-key="lens.afov"]').classList.contains("invalid"),
+    banner: document.getElementById("draft").hidden ? "" : document.getElementById("draft").textContent,
+  }));
+  check(marked.value === "200" && marked.invalid && marked.banner.includes("lens.afov = 200") && marked.banner.includes(`revision ${refusedAt + 1}`),
+    `after another edit the refused afov stays marked, and the banner says so: ${JSON.stringify(marked.banner)}`);
+
   // the 3D view: the device loads, and dragging orbits it
   await page.waitForFunction(() => window.studio.view.meshes.length > 0, null, { timeout: 60000 });
   const canvas = page.locator("#view3d");
@@ -124,6 +139,8 @@ try {
   await page.locator("#save").click();
   await page.waitForFunction(() => document.getElementById("status").textContent.startsWith("saved"), null, { timeout: 30000 });
   const saved = readFileSync(join(work, "design.toml"), "utf8");
+  check(await page.evaluate(() => document.getElementById("draft").hidden && !document.querySelector(".field.invalid")),
+    "once afov builds, its mark and the banner go");
   const expected = written.replace(/^afov = 60\.0( +# degrees)$/m, "afov = 55.0$1");
   check(expected !== written && saved === expected,
     `a saved edit keeps the spec's comments and changes one line (${saved.split("\n").find((l) => l.startsWith("afov"))})`);
