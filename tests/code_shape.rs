@@ -170,9 +170,8 @@ fn the_counter_counts() {
 /// Every `found-<id>` a source file cites is a corpus case by its full
 /// 16-digit id, kept in `tests/design-corpus/` (or its `open/` folder), so
 /// a reader can replay it.
-#[test]
-fn cited_corpus_cases_exist() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+/// Every Rust file of the workspace: src, tests, benches and the crates.
+fn workspace_rust_files(root: &Path) -> Vec<PathBuf> {
     let mut files = Vec::new();
     for dir in ["src", "tests", "benches"] {
         rust_files(&root.join(dir), &mut files);
@@ -180,6 +179,64 @@ fn cited_corpus_cases_exist() {
     for krate in std::fs::read_dir(root.join("crates")).unwrap() {
         rust_files(&krate.unwrap().path(), &mut files);
     }
+    files
+}
+
+/// Every `METHOD §N` the code and the docs cite is a section heading of
+/// docs/method.md, and no document links outside the repository for it.
+#[test]
+fn method_citations_resolve() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let method = std::fs::read_to_string(root.join("docs/method.md")).unwrap();
+    let headings: Vec<&str> = method.lines().filter(|l| l.starts_with('#')).collect();
+    let mut files = workspace_rust_files(root);
+    files.extend(["README.md", "ARCHITECTURE.md"].map(|f| root.join(f)));
+    for doc in std::fs::read_dir(root.join("docs")).unwrap() {
+        let path = doc.unwrap().path();
+        if path.extension().is_some_and(|e| e == "md") {
+            files.push(path);
+        }
+    }
+    let (mut cited, mut unresolved) = (0, Vec::new());
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        let file = f.strip_prefix(root).unwrap().display().to_string();
+        // (built from parts, so that this file does not match itself)
+        if text.contains(&["shared", "design", "METHOD"].join("/")) {
+            unresolved.push(format!("{file}: links to METHOD.md outside the repository"));
+        }
+        for (at, _) in text.match_indices("METHOD §") {
+            let rest = &text[at + "METHOD §".len()..];
+            let number: String = rest
+                .chars()
+                .take_while(|c| c.is_ascii_digit() || *c == '.')
+                .collect();
+            let number = number.trim_end_matches('.');
+            if number.is_empty() {
+                continue; // prose: `METHOD §N`
+            }
+            cited += 1;
+            let heading = format!("§{number} ");
+            if !headings
+                .iter()
+                .any(|h| h.trim_start_matches('#').trim_start().starts_with(&heading))
+            {
+                unresolved.push(format!("{file}: METHOD §{number}"));
+            }
+        }
+    }
+    assert!(cited > 50, "found only {cited} citations");
+    assert!(
+        unresolved.is_empty(),
+        "citations with no section in docs/method.md:\n{}",
+        unresolved.join("\n")
+    );
+}
+
+#[test]
+fn cited_corpus_cases_exist() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let files = workspace_rust_files(root);
     let corpus = root.join("tests/design-corpus");
     let (mut cited, mut missing) = (0, Vec::new());
     for f in &files {
