@@ -130,13 +130,22 @@ function showDraft() {
     : "";
 }
 
-function showErrors(errors) {
+// `edited`: the keys the refused request set; those the errors do not name
+// (kind = "formula", refused for its missing z) join the draft too.
+function showErrors(errors, edited = []) {
   for (const e of errors) {
     const text = e.cli || e.message;
     if (e.key && document.querySelector(`.field[data-key="${e.key}"]`)) {
       const input = inputOf(e.key);
       studio.refused.set(e.key, { text: input ? input.value : undefined, message: text });
     }
+  }
+  const named = errors.map((e) => e.key).filter(Boolean);
+  for (const key of edited) {
+    const input = inputOf(key);
+    if (named.includes(key) || !input || !document.querySelector(`.field[data-key="${key}"]`)) continue;
+    if (input.value === String(fieldValue(key) ?? "")) continue; // as the design has it
+    studio.refused.set(key, { text: input.value, message: `not applied: it needs ${named.join(", ") || "a fix"} too` });
   }
   showDraft();
   const unplaced = errors.filter((e) => !e.key || !document.querySelector(`.field[data-key="${e.key}"]`));
@@ -150,16 +159,30 @@ function showErrors(errors) {
 
 // A field's edit goes to the server as an edit of the spec's own text,
 // which keeps the user's comments, order and number formatting.
-function edit(doc, text) {
+// With refused values in the draft, the edit first goes with them: values
+// that need each other (kind = "formula" and its z) build together once
+// the last one is typed. If that is refused, the edit goes alone, so an
+// unrelated edit still builds and the draft stays marked.
+async function edit(doc, text) {
   const v = parseField(doc, text);
   const edits = [{ key: doc.key, value: v === undefined ? null : v }];
   if (doc.key === "profile.image" && v !== undefined) edits.push({ key: "profile.kind", value: "image" });
+  if (doc.key === "profile.kind" && v !== undefined && v !== "image") edits.push({ key: "profile.image", value: null });
+  const withDraft = [...edits];
+  for (const [key, draft] of studio.refused) {
+    const other = studio.keys.find((d) => d.key === key);
+    if (!other || withDraft.some((e) => e.key === key)) continue;
+    const value = parseField(other, draft.text ?? "");
+    withDraft.push({ key, value: value === undefined ? null : value });
+  }
+  if (withDraft.length > edits.length && (await patchSpec(withDraft, { quiet: true }))) return;
   patchSpec(edits);
 }
 
-function patchSpec(edits) {
+// `quiet`: a refusal leaves the page as it was (a first try).
+function patchSpec(edits, { quiet = false } = {}) {
   const request = { method: "PATCH", body: JSON.stringify({ edits }), headers: { "content-type": "application/json" } };
-  return sendSpec(request, edits.map((e) => e.key));
+  return sendSpec(request, edits.map((e) => e.key), quiet);
 }
 
 // The whole TOML replaces the draft.
@@ -169,11 +192,12 @@ function putSpec(text) {
 
 // `keys`: the keys the request edits (null: all of them), which leave the
 // draft once it builds.
-async function sendSpec(request, keys) {
+async function sendSpec(request, keys, quiet = false) {
   setStatus("checking the spec…");
   const response = await api("/api/spec", request);
   const body = await response.json().catch(() => ({}));
-  if (response.status === 422) { showErrors(body.errors || []); return false; }
+  if (response.status === 422 && quiet) return false;
+  if (response.status === 422) { showErrors(body.errors || [], keys || []); return false; }
   if (!response.ok) { $("spec-error").textContent = body.error || `HTTP ${response.status}`; return false; }
   if (keys === null) studio.refused.clear(); else for (const k of keys) studio.refused.delete(k);
   applyState(body);

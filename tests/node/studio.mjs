@@ -11,7 +11,8 @@
 // the next edit, with a banner naming the revision shown; the 3D view orbits;
 // "Write device files" writes device.stl into the output folder; "Write
 // mold" writes the halves and shows the casting numbers; an edit
-// saved keeps the spec's comments and changes only its line; at 390 px the
+// saved keeps the spec's comments and changes only its line; a formula
+// surface takes its kind and z together; at 390 px the
 // page scrolls only down. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
 
 import { existsSync, readFileSync } from "node:fs";
@@ -144,6 +145,18 @@ try {
   const expected = written.replace(/^afov = 60\.0( +# degrees)$/m, "afov = 55.0$1");
   check(expected !== written && saved === expected,
     `a saved edit keeps the spec's comments and changes one line (${saved.split("\n").find((l) => l.startsWith("afov"))})`);
+
+  // a linked edit: kind = "formula" is refused for its missing z and stays
+  // in the draft; typing z builds both together
+  const beforeFormula = await page.evaluate(() => window.studio.revision);
+  await page.locator("#f-surface-kind").selectOption("formula");
+  await page.waitForFunction(() => document.querySelector('.field[data-key="surface.kind"]').classList.contains("invalid"), null, { timeout: 30000 });
+  await page.locator("#f-surface-z").fill("(x*x - y*y)/120");
+  await page.locator("#f-surface-z").press("Tab");
+  await page.waitForFunction(([r]) => window.studio.revision > r, [beforeFormula], { timeout: 60000 });
+  const linked = await page.evaluate(() => ({ surface: window.studio.values.surface, marked: document.querySelectorAll(".field.invalid").length }));
+  check(linked.surface.kind === "formula" && linked.surface.z === "(x*x - y*y)/120" && linked.marked === 0,
+    `kind = formula, refused alone, builds with z typed after it: ${JSON.stringify(linked)}`);
 
   await page.screenshot({ path: screenshot, fullPage: true });
   console.log(`screenshot: ${screenshot}`);
