@@ -215,6 +215,7 @@ function applyState(state) {
   $("out-dir").textContent = `into ${state.out}`;
   fillForm();
   showDraft();
+  markGrid();
   showView();
   showLightPickers();
   const d = state.derived;
@@ -333,33 +334,64 @@ async function loadReport() {
 
 // ---- explore ---------------------------------------------------------------
 
+// The grid is scored for one design; a change other than its own a and d
+// makes it stale (marked, and said so), and a cell adopts its own ratio
+// of the current D_s.
+function designSignature(values) {
+  const copy = JSON.parse(JSON.stringify(values || {}));
+  if (copy.base) { delete copy.base.a; delete copy.base.d; }
+  return JSON.stringify(copy);
+}
+
 $("run-explore").addEventListener("click", async () => {
   $("explore-status").textContent = "scoring 25 cells…";
   const response = await api("/api/explore");
   const grid = await response.json();
   if (!response.ok) { $("explore-status").textContent = grid.error; return; }
+  studio.grid = { signature: designSignature(studio.values), cells: grid.cells, best: grid.best };
   const box = $("grid");
   box.replaceChildren();
   grid.cells.forEach((cell, i) => {
     const fig = document.createElement("figure");
-    if (i === grid.best) fig.className = "best";
+    if (i === grid.best) fig.classList.add("best");
     const contrast = cell.contrast == null ? "invalid"
       : cell.kept_contrast == null ? `contrast ${cell.contrast.toFixed(3)}`
       : `kept ${cell.kept_contrast.toFixed(2)}`;
     fig.innerHTML = `<img alt=""><figcaption></figcaption>`;
     fig.firstChild.src = grid.thumbnails[i];
     fig.lastChild.textContent = `a ${cell.a} · d ${cell.d_over_ds}·D_s · ${contrast}`;
-    fig.title = cell.invalid || `d = ${cell.d_mm.toFixed(4)} mm; click to adopt a and d`;
+    fig.title = cell.invalid || `d = ${cell.d_over_ds}·D_s; click to adopt a and d`;
     if (cell.contrast != null) fig.addEventListener("click", () => adopt(cell));
     box.appendChild(fig);
   });
-  $("explore-status").textContent = `best: a ${grid.cells[grid.best].a}, d ${grid.cells[grid.best].d_over_ds}·D_s (outlined)`;
+  markGrid();
 });
 
+// The current design's cell, and whether the grid is stale.
+function markGrid() {
+  const grid = studio.grid;
+  if (!grid) return;
+  const stale = designSignature(studio.values) !== grid.signature;
+  $("grid").classList.toggle("stale", stale);
+  const base = studio.values.base || {};
+  const a = base.a ?? 0;
+  const ds = studio.derived ? studio.derived.D_s : NaN;
+  const d = base.d === undefined || base.d === "focal" ? ds : base.d;
+  [...$("grid").children].forEach((fig, i) => {
+    const cell = grid.cells[i];
+    fig.classList.toggle("current", !stale && Math.abs(cell.a - a) < 1e-9 && Math.abs(cell.d_over_ds * ds - d) < 1e-6 * ds);
+  });
+  const best = grid.cells[grid.best];
+  $("explore-status").textContent = stale
+    ? "stale: the design changed since this grid was scored; score it again"
+    : `best: a ${best.a}, d ${best.d_over_ds}·D_s (outlined); the current design's cell is filled`;
+}
+
 function adopt(cell) {
+  const ds = studio.derived.D_s;
   patchSpec([
     { key: "base.a", value: cell.a },
-    { key: "base.d", value: Number(cell.d_mm.toFixed(6)) },
+    { key: "base.d", value: Number((cell.d_over_ds * ds).toFixed(6)) },
   ]);
 }
 

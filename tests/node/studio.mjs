@@ -12,7 +12,8 @@
 // "Write device files" writes device.stl into the output folder; "Write
 // mold" writes the halves and shows the casting numbers; an edit
 // saved keeps the spec's comments and changes only its line; a formula
-// surface takes its kind and z together; at 390 px the
+// surface takes its kind and z together; the explore grid marks the
+// current design's cell, and goes stale when the design changes; at 390 px the
 // page scrolls only down. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
 
 import { existsSync, readFileSync } from "node:fs";
@@ -146,6 +147,12 @@ try {
   check(expected !== written && saved === expected,
     `a saved edit keeps the spec's comments and changes one line (${saved.split("\n").find((l) => l.startsWith("afov"))})`);
 
+  // the explore grid marks the current design's cell
+  await page.locator("#run-explore").click();
+  await page.waitForFunction(() => document.getElementById("grid").children.length === 25, null, { timeout: 300000 });
+  const current = await page.evaluate(() => [...document.querySelectorAll("#grid figure.current figcaption")].map((c) => c.textContent));
+  check(current.length === 1 && current[0].startsWith("a 0 · d 1·D_s"), `the current design's cell is marked: ${JSON.stringify(current)}`);
+
   // a linked edit: kind = "formula" is refused for its missing z and stays
   // in the draft; typing z builds both together
   const beforeFormula = await page.evaluate(() => window.studio.revision);
@@ -157,6 +164,8 @@ try {
   const linked = await page.evaluate(() => ({ surface: window.studio.values.surface, marked: document.querySelectorAll(".field.invalid").length }));
   check(linked.surface.kind === "formula" && linked.surface.z === "(x*x - y*y)/120" && linked.marked === 0,
     `kind = formula, refused alone, builds with z typed after it: ${JSON.stringify(linked)}`);
+  const stale = await page.evaluate(() => [document.getElementById("grid").classList.contains("stale"), document.getElementById("explore-status").textContent]);
+  check(stale[0] && stale[1].startsWith("stale"), `the grid scored for the saddle is marked stale: ${JSON.stringify(stale[1])}`);
 
   await page.screenshot({ path: screenshot, fullPage: true });
   console.log(`screenshot: ${screenshot}`);
