@@ -75,6 +75,48 @@ function setProfileChoices(profiles) {
   old.replaceWith(select);
 }
 
+// Which keys apply to the design as written: the others (printed keys on a
+// dual-lens design, z on a saddle, …) hide unless "all keys" is ticked,
+// the spec writes them, or the draft holds them.
+function applies(key) {
+  // the draft's value where it holds one: z shows once kind = formula is typed
+  const v = (k) => {
+    const draft = studio.refused.get(k);
+    const doc = studio.keys.find((d) => d.key === k);
+    return draft && doc ? parseField(doc, draft.text ?? "") : fieldValue(k);
+  };
+  const surface = v("surface.kind") ?? "saddle";
+  const base = v("base.kind") ?? "dual-lens";
+  const profile = v("profile.kind") ?? (v("profile.image") !== undefined ? "image" : "rings");
+  const rules = {
+    "surface.radius": surface !== "plane" && surface !== "formula",
+    "surface.z": surface === "formula",
+    "base.afov": base === "dual-lens",
+    "base.duty": base === "printed",
+    "base.band_thickness": base === "printed",
+    "base.backing": base === "printed",
+    "profile.image": profile === "image",
+    "profile.mode": profile === "image",
+    "profile.blur": profile === "image",
+    "profile.threshold": profile === "image",
+    "profile.invert": profile === "image",
+    "profile.wavelength": profile === "rings",
+    "profile.angle": profile === "ramp",
+    "profile.sigma": profile === "bump",
+    "mold.bolt_diameter": v("mold.bolts") === true,
+    "mold.bolt_spacing": v("mold.bolts") === true,
+  };
+  return rules[key] ?? true;
+}
+
+function showApplicableFields() {
+  const all = $("all-keys").checked;
+  for (const field of document.querySelectorAll("#form .field")) {
+    const key = field.dataset.key;
+    field.hidden = !(all || applies(key) || fieldValue(key) !== undefined || studio.refused.has(key));
+  }
+}
+
 function fillForm() {
   for (const doc of studio.keys) {
     const input = $("f-" + doc.key.replace(".", "-"));
@@ -148,6 +190,7 @@ function showErrors(errors, edited = []) {
     studio.refused.set(key, { text: input.value, message: `not applied: it needs ${named.join(", ") || "a fix"} too` });
   }
   showDraft();
+  showApplicableFields();
   const unplaced = errors.filter((e) => !e.key || !document.querySelector(`.field[data-key="${e.key}"]`));
   if (unplaced.length) $("spec-error").textContent = unplaced.map((e) => e.cli || e.message).join("\n");
   for (const e of errors) {
@@ -215,6 +258,7 @@ function applyState(state) {
   $("out-dir").textContent = `into ${state.out}`;
   fillForm();
   showDraft();
+  showApplicableFields();
   markGrid();
   showView();
   showLightPickers();
@@ -582,6 +626,7 @@ $("write-mold").addEventListener("click", () => write("mold"));
 // ---- start -----------------------------------------------------------------
 
 $("apply-toml").addEventListener("click", () => putSpec($("toml").value));
+$("all-keys").addEventListener("change", showApplicableFields);
 $("save").addEventListener("click", async () => {
   const response = await api("/api/save", { method: "POST" });
   const body = await response.json().catch(() => ({}));

@@ -12,7 +12,8 @@
 // "Write device files" writes device.stl into the output folder; "Write
 // mold" writes the halves and shows the casting numbers; an edit
 // saved keeps the spec's comments and changes only its line; a formula
-// surface takes its kind and z together; the explore grid marks the
+// surface takes its kind and z together (z shows once the kind is
+// formula; only the keys that apply show); the explore grid marks the
 // current design's cell, and goes stale when the design changes; at 390 px the
 // page scrolls only down. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
 
@@ -152,6 +153,14 @@ try {
   await page.waitForFunction(() => document.getElementById("grid").children.length === 25, null, { timeout: 300000 });
   const current = await page.evaluate(() => [...document.querySelectorAll("#grid figure.current figcaption")].map((c) => c.textContent));
   check(current.length === 1 && current[0].startsWith("a 0 · d 1·D_s"), `the current design's cell is marked: ${JSON.stringify(current)}`);
+
+  // only the keys that apply show: no z on a saddle, no printed keys on a
+  // dual-lens device; "all keys" shows them
+  const applicable = await page.evaluate(() => ["surface.z", "base.duty", "surface.radius"].map((k) => !document.querySelector(`.field[data-key="${k}"]`).hidden));
+  await page.locator("#all-keys").check();
+  const all = await page.evaluate(() => [...document.querySelectorAll("#form .field")].every((f) => !f.hidden));
+  await page.locator("#all-keys").uncheck();
+  check(!applicable[0] && !applicable[1] && applicable[2] && all, `z and duty hide on a dual-lens saddle, radius shows, "all keys" shows every key (${applicable})`);
 
   // a linked edit: kind = "formula" is refused for its missing z and stays
   // in the draft; typing z builds both together
