@@ -228,14 +228,32 @@ function patchSpec(edits, { quiet = false } = {}) {
   return sendSpec(request, edits.map((e) => e.key), quiet);
 }
 
-// The whole TOML replaces the draft.
-function putSpec(text) {
-  return sendSpec({ method: "PUT", body: text, headers: { "content-type": "application/toml" } }, null);
+// The whole TOML replaces the draft. `how`: "undo" or "redo" when it
+// steps through the history (see applyState).
+function putSpec(text, how = "edit") {
+  return sendSpec({ method: "PUT", body: text, headers: { "content-type": "application/toml" } }, null, false, how);
+}
+
+// Undo and redo step through the spec texts this page has built: each is
+// put again as a new revision.
+studio.history = []; studio.future = []; studio.text = undefined; studio.savedText = undefined;
+async function undo() {
+  if (!studio.history.length) return;
+  if (!(await putSpec(studio.history.pop(), "undo"))) setStatus("undo refused");
+}
+async function redo() {
+  if (!studio.future.length) return;
+  if (!(await putSpec(studio.future.pop(), "redo"))) setStatus("redo refused");
+}
+function showSaved() {
+  $("unsaved").hidden = studio.text === studio.savedText;
+  $("undo").disabled = !studio.history.length;
+  $("redo").disabled = !studio.future.length;
 }
 
 // `keys`: the keys the request edits (null: all of them), which leave the
 // draft once it builds.
-async function sendSpec(request, keys, quiet = false) {
+async function sendSpec(request, keys, quiet = false, how = "edit") {
   setStatus("checking the spec…");
   const response = await api("/api/spec", request);
   const body = await response.json().catch(() => ({}));
@@ -243,11 +261,18 @@ async function sendSpec(request, keys, quiet = false) {
   if (response.status === 422) { showErrors(body.errors || [], keys || []); return false; }
   if (!response.ok) { $("spec-error").textContent = body.error || `HTTP ${response.status}`; return false; }
   if (keys === null) studio.refused.clear(); else for (const k of keys) studio.refused.delete(k);
-  applyState(body);
+  applyState(body, how);
   return true;
 }
 
-function applyState(state) {
+function applyState(state, how = "edit") {
+  if (studio.text !== undefined && state.spec !== studio.text) {
+    if (how === "undo") studio.future.push(studio.text);
+    else { studio.history.push(studio.text); if (how !== "redo") studio.future = []; }
+  }
+  studio.text = state.spec;
+  if (studio.savedText === undefined) studio.savedText = state.spec;
+  showSaved();
   studio.values = state.values;
   studio.revision = state.revision;
   studio.design = state.design;
@@ -631,6 +656,15 @@ $("save").addEventListener("click", async () => {
   const response = await api("/api/save", { method: "POST" });
   const body = await response.json().catch(() => ({}));
   setStatus(response.ok ? `saved ${body.saved}` : body.error || `HTTP ${response.status}`);
+  if (response.ok) { studio.savedText = studio.text; showSaved(); }
+});
+$("undo").addEventListener("click", undo);
+$("redo").addEventListener("click", redo);
+document.addEventListener("keydown", (e) => {
+  // in a text field the browser's own undo applies
+  if (!(e.ctrlKey || e.metaKey) || e.key.toLowerCase() !== "z" || e.target.closest("input, textarea, select")) return;
+  e.preventDefault();
+  if (e.shiftKey) redo(); else undo();
 });
 
 (async () => {

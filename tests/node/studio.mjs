@@ -13,7 +13,8 @@
 // mold" writes the halves and shows the casting numbers; an edit
 // saved keeps the spec's comments and changes only its line; a formula
 // surface takes its kind and z together (z shows once the kind is
-// formula; only the keys that apply show); the explore grid marks the
+// formula; only the keys that apply show); undo and redo step through the
+// revisions, with an unsaved mark; the explore grid marks the
 // current design's cell, and goes stale when the design changes; at 390 px the
 // page scrolls only down. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
 
@@ -147,6 +148,25 @@ try {
   const expected = written.replace(/^afov = 60\.0( +# degrees)$/m, "afov = 55.0$1");
   check(expected !== written && saved === expected,
     `a saved edit keeps the spec's comments and changes one line (${saved.split("\n").find((l) => l.startsWith("afov"))})`);
+
+  // undo and redo (Ctrl+Z, Ctrl+Shift+Z) step through the revisions; the
+  // unsaved mark follows the saved text
+  const afovIs = (x) => page.waitForFunction(([x]) => window.studio.values.lens.afov === x, [x], { timeout: 60000 });
+  await page.locator("#f-lens-afov").fill("50");
+  await page.locator("#f-lens-afov").press("Tab");
+  await afovIs(50);
+  const unsavedAfterEdit = await page.locator("#unsaved").isVisible();
+  await page.locator("header h1").click();
+  await page.keyboard.press("Control+z");
+  await afovIs(55);
+  const unsavedAfterUndo = await page.locator("#unsaved").isVisible();
+  const fieldAfterUndo = await page.locator("#f-lens-afov").inputValue();
+  await page.keyboard.press("Control+Shift+z");
+  await afovIs(50);
+  await page.keyboard.press("Control+z");
+  await afovIs(55);
+  check(unsavedAfterEdit && !unsavedAfterUndo && fieldAfterUndo === "55",
+    "an edit marks the spec unsaved; Ctrl+Z undoes it (afov 50 -> 55, the saved text again), Ctrl+Shift+Z redoes it");
 
   // the explore grid marks the current design's cell
   await page.locator("#run-explore").click();
