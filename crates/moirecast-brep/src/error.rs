@@ -1,7 +1,7 @@
 //! The one error type of this crate; each variant says what went wrong and
 //! where, in words a user can act on.
 
-use crate::lenses::Array;
+use crate::array::Array;
 use moirecast_kernel::KernelError;
 
 #[derive(Debug, thiserror::Error)]

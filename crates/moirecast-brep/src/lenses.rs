@@ -52,7 +52,7 @@ const VERIFY_S: [f64; 2] = [1.0 / 3.0, 2.0 / 3.0];
 const VERIFY_T: [f64; 4] = [0.05, 0.35, 0.6, 0.95];
 /// How far over the fit the independent sample of a band span may lie
 /// before the span gets more pieces across: to half the tolerance.
-const VERIFY_SLACK: f64 = 0.5 / crate::solid::FIT_SHARE;
+const VERIFY_SLACK: f64 = 0.5 / FIT_SHARE;
 /// Times a band span family's refinement goes on from the samples the
 /// independent check found beyond [`VERIFY_SLACK`].
 const MAX_RESTARTS: usize = 8;
@@ -147,12 +147,11 @@ fn first_spacing(design: &Design) -> f64 {
     detail.map_or(FIRST_SPACING_MM, |d| d.min(FIRST_SPACING_MM))
 }
 
-/// Which array a family of lens surfaces belongs to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Array {
-    Revealer,
-    Base,
-}
+pub use crate::array::Array;
+
+/// Share of the mesh tolerance a lens surface may deviate from the exact
+/// lens: the rest is left for tessellating the B-rep (the cross-check).
+pub const FIT_SHARE: f64 = 0.1;
 
 /// The lens surfaces of one array over shared stations.
 pub struct LensFamily {

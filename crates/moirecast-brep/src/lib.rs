@@ -23,6 +23,7 @@
 //! ```
 
 pub(crate) mod channels;
+mod array;
 pub mod crosscheck;
 pub mod error;
 pub mod lenses;

@@ -14,6 +14,7 @@
 //! measures that.
 
 use crate::error::BrepError;
+pub use crate::lenses::FIT_SHARE;
 use crate::lenses::{worst_deviation, Array, LensFamily};
 use crate::spline::{chord_lengths, clamped_knots, interpolate};
 use crate::topology::{pieces, Piece, Run};
@@ -29,9 +30,6 @@ use truck_modeling::{
     Surface, Vector4, Vertex, Wire,
 };
 
-/// Share of the mesh tolerance a lens surface may deviate from the exact
-/// lens: the rest is left for tessellating the B-rep (the cross-check).
-pub const FIT_SHARE: f64 = 0.1;
 /// Layout margin (mm) of the lens surfaces beyond the stations they are
 /// trimmed at, in lens periods: the trims stay clear of the surface edges.
 const MARGIN_PERIODS: f64 = 2.0;
