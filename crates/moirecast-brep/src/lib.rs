@@ -22,8 +22,8 @@
 //! assert!(step.step.len() > 0);
 //! ```
 
-pub(crate) mod channels;
 mod array;
+pub(crate) mod channels;
 pub mod crosscheck;
 pub mod error;
 pub mod lenses;
