@@ -209,32 +209,20 @@ def halves_mesh_closed(out, deflections=(0.05, 0.01)):
             brepmesh_matches_the_stl(out / f"mold-{half}.step", out / f"mold-{half}.stl", deflection)
 
 
-def known_ear(spec, deflection):
-    """`pytest.param` of (spec, deflection), failing as expected (strict:
-    a pass is reported, so the mark goes when the ear does) where the
-    design's corner lens sliver makes BRepMesh's ear pair
-    (docs/decisions.md, B-rep): saddle-horse at 0.05 mm."""
-    if spec.stem == "saddle-horse" and deflection > 0.01:
-        reason = "ear pair where a wall trims a base lens sliver at a corner (docs/decisions.md)"
-        return pytest.param(spec, deflection, marks=pytest.mark.xfail(strict=True, reason=reason))
-    return pytest.param(spec, deflection)
-
-
-HALF_MESHINGS = [known_ear(s, d) for s in MOLD_SPECS for d in (0.05, 0.01)]
+HALF_MESHINGS = [pytest.param(s, d) for s in MOLD_SPECS for d in (0.05, 0.01)]
 
 
 @pytest.mark.parametrize("spec,deflection", HALF_MESHINGS, ids=[f"{s.stem}-{d}" for s in MOLD_SPECS for d in (0.05, 0.01)])
 def test_the_halves_step_mesh_closed(spec, deflection, molds):
-    """Every shipped mold's halves mesh closed in OpenCascade at 0.05 and
-    0.01 mm (but for one known ear pair), and its posed device.step at
-    0.01 mm (at 0.05 mm two designs make an ear pair, as their device.step
-    does)."""
+    """Every shipped mold's halves and its posed device.step mesh closed
+    in OpenCascade at 0.05 and 0.01 mm. (Until the lenses ended in the
+    front and back walls, the reference's base lens sliver at a corner made
+    an ear pair at 0.05 mm: docs/decisions.md, B-rep.)"""
     from test_step_oracles import brepmesh_matches_the_stl
 
     out, _ = molds(spec)
     halves_mesh_closed(out, (deflection,))
-    if deflection == 0.01:
-        brepmesh_matches_the_stl(out / "device.step", out / "device.stl", 0.01)
+    brepmesh_matches_the_stl(out / "device.step", out / "device.stl", deflection)
 
 
 TINY_MOLD = ROOT / "tests" / "python" / "specs" / "tiny-mold.toml"
@@ -317,7 +305,7 @@ def test_random_designs_cavity_step_is_a_valid_solid_where_the_cavity_is(tmp_pat
     area of these designs' slopes), and its centre of mass device.stl's to
     within the tolerance; and each half's STEP is a valid solid of its STL
     half's volume, to 1e-4 and the chord deficit (`check_half_steps`), and
-    meshes closed in OpenCascade at 0.01 mm (`halves_mesh_closed`), as the
+    meshes closed in OpenCascade at 0.05 and 0.01 mm (`halves_mesh_closed`), as the
     device.step does."""
     import random
 
@@ -352,9 +340,9 @@ def test_random_designs_cavity_step_is_a_valid_solid_where_the_cavity_is(tmp_pat
         # at tolerance 0.01 on these small halves the lens chords' deficit
         # (measured 1.15 mm³ of 10,925) is as large as 1e-4 itself
         check_half_steps(out, report, text, chords=2.0 * d["width_mm"] * d["height_mm"] * tol)
-        # at 0.01 mm: at 0.05 a corner lens sliver can make an ear pair
-        halves_mesh_closed(out, (0.01,))
-        brepmesh_matches_the_stl(out / "device.step", out / "device.stl", 0.01)
+        halves_mesh_closed(out, (0.05, 0.01))
+        for deflection in (0.05, 0.01):
+            brepmesh_matches_the_stl(out / "device.step", out / "device.stl", deflection)
     assert built == RANDOM_DESIGNS, f"only {built} of 40 random designs built (seed {OCC_SEED})"
 
 

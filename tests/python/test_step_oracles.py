@@ -185,22 +185,9 @@ def brepmesh_matches_the_stl(step, stl, deflection, pieces=1):
     assert abs(meshed.mesh.volume - reference.volume) <= bound, (step.name, deflection, meshed.mesh.volume, reference.volume)
 
 
-# Where BRepMesh makes an ear pair at a corner lens sliver at 0.05 mm
-# (docs/decisions.md, B-rep): expected failures, strict, so that the mark
-# goes when the ear does.
-DEVICE_EARS_AT_005 = {"saddle-horse"}
-
-
-def device_meshing(spec, deflection):
-    if deflection > 0.01 and spec.stem in DEVICE_EARS_AT_005:
-        reason = "ear pair where a wall trims a lens sliver at a corner (docs/decisions.md)"
-        return pytest.param(spec, deflection, marks=pytest.mark.xfail(strict=True, reason=reason))
-    return pytest.param(spec, deflection)
-
-
 @pytest.mark.parametrize(
     "spec,deflection",
-    [device_meshing(s, d) for s in SPECS for d in (0.05, 0.01)],
+    [(s, d) for s in SPECS for d in (0.05, 0.01)],
     ids=[f"{s.stem}-{d}" for s in SPECS for d in (0.05, 0.01)],
 )
 def test_brepmesh_closes_every_device_step(spec, deflection, built):
@@ -208,6 +195,8 @@ def test_brepmesh_closes_every_device_step(spec, deflection, built):
     0.05 and 0.01 mm (what FreeCAD and slicers do with it), is one closed
     piece of device.stl's volume (issue 48: a trim that ended off its
     crease made the reader fill degenerated edges: 116 open edges on
-    832833c's reference), but for the known ear pairs."""
+    832833c's reference; and where a wall trimmed a lens sliver at a
+    corner, an ear pair at 0.05 mm on the reference, until the lenses
+    ended in the front and back walls)."""
     stl, _ = built(spec)
     brepmesh_matches_the_stl(stl.with_name("device.step"), stl, deflection)

@@ -19,6 +19,7 @@
 //! for every lens, the surface lies within `fit` of the exact arc of that
 //! station; a second, independent sample then measures the worst distance.
 
+use crate::ends::WallEnds;
 use crate::error::BrepError;
 use crate::spline::{clamped_knots, interpolate};
 use glam::DVec3;
@@ -161,6 +162,9 @@ pub struct LensFamily {
     pub surfaces: BTreeMap<i64, NurbsSurface<Vector4>>,
     /// Worst distance (mm) of the independent sample, and where.
     pub deviation: Deviation,
+    /// The stations at which the surfaces end in a wall, where they do
+    /// ([`crate::ends`]).
+    pub ends: WallEnds,
 }
 
 /// A distance (mm) from the exact lenses, and where: lens, t, v.
@@ -277,6 +281,7 @@ impl LensFamily {
                         stations,
                         surfaces,
                         deviation,
+                        ends: WallEnds::default(),
                     },
                     misses,
                 });

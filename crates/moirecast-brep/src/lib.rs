@@ -25,6 +25,7 @@
 mod array;
 pub(crate) mod channels;
 pub mod crosscheck;
+pub mod ends;
 pub mod error;
 pub mod lenses;
 pub mod mold;

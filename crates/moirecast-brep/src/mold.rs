@@ -21,11 +21,12 @@
 //! region mesh's positions (f32, as the STL halves).
 
 use crate::channels;
+use crate::ends::{into_plane, iso_edge, End, WallEnds, WallPlane};
 use crate::error::BrepError;
 use crate::lenses::LensFamily;
 use crate::solid::{
     assemble, boundary_span, closed_solid, crease_curve, cubic_through, cut_to_span, face_facing,
-    lens_families, point3, surface_face, DeviceBrep, EdgeCurve,
+    point3, surface_face, DeviceBrep, EdgeCurve,
 };
 use crate::spline::chord_lengths;
 use crate::topology::{pieces, Piece, Run};
@@ -157,6 +158,27 @@ struct Frame<'a> {
     /// The mesh's tolerance (mm): a vertex a channel made on a crease lies
     /// on the mesh's chord there, within this of the crease.
     tolerance: f64,
+    /// Where the revealer's and the base's surfaces end in walls.
+    ends: [WallEnds; 2],
+}
+
+impl Frame<'_> {
+    fn ends_of(&self, lens: LensRef) -> WallEnds {
+        match lens {
+            LensRef::Revealer(_) => self.ends[0],
+            LensRef::Base(_) => self.ends[1],
+        }
+    }
+
+    /// The plane of `wall` of the outline.
+    fn wall_plane(&self, wall: Wall) -> WallPlane {
+        let origin = onto(&self.outline, wall, DVec3::ZERO);
+        let normal = match wall {
+            Wall::XMin | Wall::XMax => DVec3::X,
+            Wall::YMin | Wall::YMax => DVec3::Y,
+        };
+        WallPlane { origin, normal }
+    }
 }
 
 /// The truck matrix of an affine map of points.
@@ -208,7 +230,7 @@ pub fn region_brep(
         .map(|t| region_label(posed, region, t))
         .collect();
     let device_vertex = |v: u32| region.device_vertices.get(v as usize).copied();
-    let (revealer, base) = lens_families(design, dm)?;
+    let device = crate::solid::build_brep(design, dm)?;
     build(
         (design, dm, posed),
         (&region.mesh, &labels, &device_vertex),
@@ -220,8 +242,9 @@ pub fn region_brep(
             bumps: HashMap::new(),
             channels: &[],
             tolerance: design.tolerance.mm(),
+            ends: [device.revealer.ends, device.base.ends],
         },
-        (bumps, (&revealer, &base)),
+        (bumps, (&device.revealer, &device.base)),
     )
 }
 
@@ -278,9 +301,44 @@ pub fn half_brep(
             bumps: HashMap::new(),
             channels: &exact.channels,
             tolerance: design.tolerance.mm(),
+            ends: [device.revealer.ends, device.base.ends],
         },
         (&exact.bumps, (&device.revealer, &device.base)),
     )
+}
+
+/// A posed lens surface whose ends lie in the device's front and back
+/// walls ([`crate::ends`]), its end columns put into the mold's wall planes
+/// (the outline's, where the posed mesh's f32 vertices lie; the pose moved
+/// them off it by round-off).
+fn ended_in_posed_walls(
+    mut surface: NurbsSurface<Vector4>,
+    ends: WallEnds,
+    frame: &Frame,
+) -> NurbsSurface<Vector4> {
+    for (end, ended) in [(End::First, ends.first), (End::Last, ends.last)] {
+        if ended.is_none() {
+            continue;
+        }
+        let rows = surface.control_points();
+        let column = match end {
+            End::First => 0,
+            End::Last => rows[0].len() - 1,
+        };
+        let h = rows[0][column];
+        let y = h.y / h.w;
+        let wall = [Wall::YMin, Wall::YMax]
+            .into_iter()
+            .min_by(|a, b| {
+                let d = |w: &Wall| (onto(&frame.outline, *w, DVec3::ZERO).y - y).abs();
+                d(a).total_cmp(&d(b))
+            })
+            .expect("two walls");
+        if let Some(put) = into_plane(surface.clone(), end, frame.wall_plane(wall)) {
+            surface = put;
+        }
+    }
+    surface
 }
 
 /// The B-rep of the closed `mesh` whose triangles lie on `labels`, its
@@ -293,14 +351,17 @@ fn build<'a>(
 ) -> Result<RegionBrep, BrepError> {
     let pieces = pieces(mesh, labels)?;
     let matrix = matrix_of(posed.pose.affine());
+    let pose = |family: &LensFamily, s: &NurbsSurface<Vector4>| {
+        ended_in_posed_walls(s.transformed(matrix), family.ends, &frame)
+    };
     let posed_surfaces: HashMap<LensRef, NurbsSurface<Vector4>> = revealer
         .surfaces
         .iter()
-        .map(|(&i, s)| (LensRef::Revealer(i), s.transformed(matrix)))
+        .map(|(&i, s)| (LensRef::Revealer(i), pose(revealer, s)))
         .chain(
             base.surfaces
                 .iter()
-                .map(|(&k, s)| (LensRef::Base(k), s.transformed(matrix))),
+                .map(|(&k, s)| (LensRef::Base(k), pose(base, s))),
         )
         .collect();
     // each square's bump: the one nearest a triangle of its top
@@ -827,8 +888,10 @@ fn edge_curve<'s>(
             // parameter may be far from the crease's where the lens is steep
             // (found-84f9858ee9297332: 0.0101 at 108.7° AFOV), so the ends
             // are held to the crease in space, not in parameter.
+            let (_, (first, last)) = truck_modeling::BoundedSurface::range_tuple(surface);
             let near_crease = |t: f64, end: DVec3, along: f64| {
-                let q = surface.subs(t, along);
+                // a surface ended in a wall ends at or before its wall vertices
+                let q = surface.subs(t, along.clamp(first, last));
                 end.distance(DVec3::new(q.x, q.y, q.z)) <= 2.0 * frame.tolerance
             };
             let t = [0.0, 1.0]
@@ -845,8 +908,24 @@ fn edge_curve<'s>(
                 surface, t, a.y, b.y,
             ))))
         }
-        (Lens(_), DeviceWall(w)) | (DeviceWall(w), Lens(_)) => {
-            Ok(Curve::BSplineCurve(cubic_through(&pts, |p| onto(&frame.outline, w, p))).into())
+        (Lens(lens), DeviceWall(w)) | (DeviceWall(w), Lens(lens)) => {
+            let (a, b, surface) = lens_ends(lens)?;
+            match (w, frame.ends_of(lens).end_of(a.y, b.y)) {
+                (Wall::YMin | Wall::YMax, Some(end)) => {
+                    let sides = [Wall::XMin, Wall::XMax].map(|w| frame.wall_plane(w));
+                    let ends_at = [pts[0], pts[pts.len() - 1]];
+                    Ok(EdgeCurve::fixed(iso_edge(
+                        surface,
+                        end,
+                        ([a.x, b.x], ends_at),
+                        &sides,
+                        frame.tolerance,
+                    )))
+                }
+                _ => Ok(
+                    Curve::BSplineCurve(cubic_through(&pts, |p| onto(&frame.outline, w, p))).into(),
+                ),
+            }
         }
         (DeviceWall(w), Block(RegionSurface::Skirt(_)))
         | (Block(RegionSurface::Skirt(_)), DeviceWall(w)) => {

@@ -5,7 +5,9 @@
 //! - crease edges: the boundary curve that two neighbouring lens surfaces
 //!   share exactly, cut to the run's stations;
 //! - the outermost revealer creases, which lie in the x-walls: the same;
-//! - trims, where a wall cuts a lens: the C² cubic through the exact
+//! - where the front or back wall cuts a lens: the lens surface's end
+//!   iso-curve, which lies in the wall's plane ([`crate::ends`]);
+//! - other trims, where a wall cuts a lens: the C² cubic through the exact
 //!   intersection points the mesher solved, flattened into the wall plane;
 //! - wall corners: vertical lines.
 //!
@@ -13,6 +15,7 @@
 //! directions, so the shell is closed by construction; `ShellCondition`
 //! measures that.
 
+use crate::ends::{end_in_wall, iso_edge, End, WallCut, WallEnds, WallPlane, END_SHARE};
 use crate::error::BrepError;
 pub use crate::lenses::FIT_SHARE;
 use crate::lenses::{worst_deviation, Array, LensFamily};
@@ -171,17 +174,32 @@ pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepEr
         || pieces(&dm.mesh, &dm.patches),
         || lens_families(design, dm),
     );
-    let (pieces, (revealer, base)) = (pieces?, families?);
+    let (pieces, (mut revealer, mut base)) = (pieces?, families?);
+    for (array, cut) in wall_cuts(design, dm, &pieces) {
+        let family = match array {
+            Array::Revealer => &mut revealer,
+            Array::Base => &mut base,
+        };
+        end_in_wall(family, &cut, END_SHARE * design.tolerance.mm());
+    }
     let surface_of = |lens: LensRef| match lens {
         LensRef::Revealer(i) => &revealer.surfaces[&i],
         LensRef::Base(k) => &base.surfaces[&k],
+    };
+    let ends_of = |lens: LensRef| match lens {
+        LensRef::Revealer(_) => revealer.ends,
+        LensRef::Base(_) => base.ends,
+    };
+    let lenses = Lenses {
+        surface_of: &surface_of,
+        ends_of: &ends_of,
     };
 
     let assembled = assemble(
         &pieces,
         &dm.mesh.positions,
         |piece| lens_of(piece.patch).is_none(),
-        |piece, other, run| edge_curve(design, dm, piece, other, run, &surface_of),
+        |piece, other, run| edge_curve(design, dm, (piece, other, run), &lenses),
         |piece, wires| make_face(design, dm, piece, wires, &surface_of),
     )?;
     let (edge_count, vertex_count) = (assembled.edges, assembled.vertices);
@@ -344,6 +362,7 @@ fn ends(curve: &Curve) -> Option<(DVec3, DVec3)> {
     match curve {
         Curve::Line(Line(a, b)) => Some((p(*a), p(*b))),
         Curve::BSplineCurve(c) => Some((p(c.front()), p(c.back()))),
+        Curve::NurbsCurve(c) => Some((p(c.front()), p(c.back()))),
         _ => None,
     }
 }
@@ -468,15 +487,19 @@ fn vertex_places(made: &[((u32, u32), u32, u32, EdgeCurve)]) -> HashMap<u32, DVe
     placed
 }
 
+/// The lens surfaces a device's edges lie on, and where they end in walls.
+struct Lenses<'s> {
+    surface_of: &'s dyn Fn(LensRef) -> &'s NurbsSurface<Vector4>,
+    ends_of: &'s dyn Fn(LensRef) -> WallEnds,
+}
+
 /// The curve of the edge along `run` (from its first vertex to its last),
 /// seen from `piece`; `other` is the piece across it.
-fn edge_curve<'s>(
+fn edge_curve(
     design: &Design,
     dm: &DeviceMesh,
-    piece: &Piece,
-    other: &Piece,
-    run: &Run,
-    surface_of: &dyn Fn(LensRef) -> &'s truck_modeling::NurbsSurface<truck_modeling::Vector4>,
+    (piece, other, run): (&Piece, &Piece, &Run),
+    lenses: &Lenses,
 ) -> Result<EdgeCurve, BrepError> {
     let at = |v: u32| dm.mesh.positions[v as usize];
     let (Some(lens), other_patch) = (lens_of(piece.patch), other.patch) else {
@@ -497,16 +520,16 @@ fn edge_curve<'s>(
         .map(|&v| dm.origins[v as usize].params_on(lens))
         .collect::<Option<Vec<_>>>()
         .ok_or_else(|| BrepError::Topology(format!("run of {lens:?} leaves the lens")))?;
+    let (first, last) = (params[0], *params.last().unwrap());
     let on_crease = [0.0, 1.0]
         .into_iter()
         .find(|&t| params.iter().all(|p| p.x == t));
     if let Some(t) = on_crease {
-        let (v0, v1) = (params[0].y, params.last().unwrap().y);
         return Ok(EdgeCurve::fixed(Curve::BSplineCurve(crease_curve(
-            surface_of(lens),
+            (lenses.surface_of)(lens),
             t,
-            v0,
-            v1,
+            first.y,
+            last.y,
         ))));
     }
     let Patch::Wall(side) = other_patch else {
@@ -515,8 +538,99 @@ fn edge_curve<'s>(
             other_patch
         )));
     };
+    let ends = (lenses.ends_of)(lens);
+    if let (Side::Front | Side::Back, Some(end)) = (side, ends.end_of(first.y, last.y)) {
+        let sides = [Side::Left, Side::Right].map(|s| {
+            let (origin, normal) = wall_plane(design, s);
+            WallPlane { origin, normal }
+        });
+        let ends_at = [at(run.vertices[0]), at(*run.vertices.last().unwrap())];
+        return Ok(EdgeCurve::fixed(iso_edge(
+            (lenses.surface_of)(lens),
+            end,
+            ([first.x, last.x], ends_at),
+            &sides,
+            design.tolerance.mm(),
+        )));
+    }
     let pts: Vec<DVec3> = run.vertices.iter().map(|&v| at(v)).collect();
     Ok(trim_curve(design, side, &pts).into())
+}
+
+/// Where the families' surfaces are to end in the front and back walls
+/// ([`crate::ends`]): for each array and wall, the station of its wall
+/// vertices nearest the layout. A wall is left out where a boundary run of
+/// that array ends beyond that station off the wall (a base crease meeting
+/// a side wall in the corner), whose vertex the ending would move.
+fn wall_cuts(design: &Design, dm: &DeviceMesh, pieces: &[Piece]) -> Vec<(Array, WallCut)> {
+    type Key = (u8, u8);
+    let mut on_wall: HashMap<Key, (Vec<f64>, std::collections::HashSet<u32>)> = HashMap::new();
+    let mut run_ends: HashMap<u8, Vec<(u32, f64)>> = HashMap::new();
+    for piece in pieces {
+        let Some(lens) = lens_of(piece.patch) else {
+            continue;
+        };
+        let array = family_key(lens).0 as u8;
+        let station = |v: u32| dm.origins[v as usize].params_on(lens).map(|p| p.y);
+        for run in piece.loops.iter().flatten() {
+            if let Patch::Wall(side @ (Side::Front | Side::Back)) = pieces[run.neighbour].patch {
+                let entry = on_wall.entry((array, side as u8)).or_default();
+                for &v in &run.vertices {
+                    entry.0.extend(station(v));
+                    entry.1.insert(v);
+                }
+            }
+            for v in [run.vertices[0], *run.vertices.last().unwrap()] {
+                run_ends
+                    .entry(array)
+                    .or_default()
+                    .extend(station(v).map(|s| (v, s)));
+            }
+        }
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let mut cuts = Vec::new();
+    for array in [Array::Revealer, Array::Base] {
+        let key = |side: Side| (array as u8, side as u8);
+        let (Some(front), Some(back)) = (
+            on_wall.get(&key(Side::Front)),
+            on_wall.get(&key(Side::Back)),
+        ) else {
+            continue;
+        };
+        let back_is_last = mean(&back.0) > mean(&front.0);
+        for (side, (stations, vertices)) in [(Side::Front, front), (Side::Back, back)] {
+            let end = if (side == Side::Back) == back_is_last {
+                End::Last
+            } else {
+                End::First
+            };
+            let station = match end {
+                End::Last => stations.iter().copied().fold(f64::INFINITY, f64::min),
+                End::First => stations.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            };
+            let beyond = |s: f64| match end {
+                End::Last => s > station,
+                End::First => s < station,
+            };
+            let clear = run_ends[&(array as u8)]
+                .iter()
+                .all(|&(v, s)| !beyond(s) || vertices.contains(&v));
+            if clear && station.is_finite() {
+                let (origin, normal) = wall_plane(design, side);
+                let plane = WallPlane { origin, normal };
+                cuts.push((
+                    array,
+                    WallCut {
+                        end,
+                        station,
+                        plane,
+                    },
+                ));
+            }
+        }
+    }
+    cuts
 }
 
 /// The crease curve of `surface` at t = 0 (its first row of control
@@ -538,9 +652,14 @@ pub(crate) fn crease_curve(
         .map(|h| Point3::new(h.x / h.w, h.y / h.w, h.z / h.w))
         .collect();
     let mut whole = BSplineCurve::new(surface.vknot_vec().clone(), points);
-    let (lo, hi) = (v0.min(v1), v0.max(v1));
-    let mut piece_curve = whole.cut(lo);
-    let _after = piece_curve.cut(hi);
+    // a surface ended in a wall ends where the wall's vertices are, or
+    // nearer the layout (crate::ends): a station beyond its end is its end
+    let (first, last) = truck_modeling::BoundedCurve::range_tuple(&whole);
+    let (lo, hi) = (v0.min(v1).max(first), v0.max(v1).min(last));
+    let mut piece_curve = if lo > first { whole.cut(lo) } else { whole };
+    if hi < last {
+        let _after = piece_curve.cut(hi);
+    }
     if v0 > v1 {
         piece_curve.invert();
     }
