@@ -458,3 +458,32 @@ fn a_write_gives_the_command_lines_bytes() {
         );
     }
 }
+
+#[test]
+fn a_refused_write_is_worded_for_the_page() {
+    // a printed device cannot be cast: the mold is refused by a named rule
+    let printed = SMALL.replace(
+        "kind = \"dual-lens\"\na = 0.0\nd = \"focal\"",
+        "kind = \"printed\"\na = 0.0",
+    );
+    let studio = Studio::start("refused-write", &printed);
+    let events = studio.events_until_finished(|| {
+        let r = studio.request("POST", "/api/write?what=mold", b"");
+        assert_eq!(r.status, 202);
+    });
+    let error = events
+        .lines()
+        .filter_map(|l| l.strip_prefix("data: "))
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .find(|e| e["kind"] == "error")
+        .unwrap_or_else(|| panic!("no error event: {events}"));
+    assert_eq!(error["refusal"], true, "{error}");
+    let message = error["message"].as_str().unwrap();
+    // no command-line prefix, no spec path; the key and the rule stay
+    assert!(!message.starts_with("error:"), "{message}");
+    assert!(
+        !message.contains("design.toml") && !message.contains("spec `"),
+        "{message}"
+    );
+    assert!(message.contains("base.kind"), "{message}");
+}

@@ -124,7 +124,7 @@ impl Revision {
     }
 
     /// What `build` makes of the spec, built once into the revision's
-    /// `cell`, on tokio's blocking pool; errors in the command line's words.
+    /// `cell`, on tokio's blocking pool; errors in the page's words.
     async fn cached<T: Send + Sync + 'static>(
         self: &Arc<Self>,
         cell: fn(&Revision) -> &Built<T>,
@@ -134,7 +134,11 @@ impl Revision {
         blocking(move || {
             let stop = Replaced(&rev.replaced);
             cell(&rev)
-                .get_or_init(|| build(&rev.spec, &stop).map(Arc::new).map_err(cli_words))
+                .get_or_init(|| {
+                    build(&rev.spec, &stop)
+                        .map(Arc::new)
+                        .map_err(|e| page_words(e, &rev.spec.origin))
+                })
                 .clone()
         })
         .await
@@ -152,9 +156,23 @@ impl Progress for Replaced<'_> {
     }
 }
 
-/// An error as the command line prints it.
-fn cli_words(e: anyhow::Error) -> String {
-    format!("error: {e:#}")
+/// An error in the page's words: as the command line prints it, but
+/// without its `error:` prefix and the spec file's path (the page shows
+/// one spec); a refused value as its key, value, problem and fix.
+fn page_words(e: anyhow::Error, origin: &str) -> String {
+    if let Some(RunError::Spec(SpecError::Invalid {
+        key,
+        value,
+        problem,
+        fix,
+        ..
+    })) = e.downcast_ref::<RunError>()
+    {
+        return format!("{key} = {value}: {problem}.\nFix: {fix}");
+    }
+    format!("{e:#}")
+        .replace(&format!("spec `{origin}`: "), "")
+        .replace("\n  Fix: ", "\nFix: ")
 }
 
 /// Runs `f` on tokio's blocking pool.
@@ -826,7 +844,7 @@ async fn save(State(studio): State<Arc<Studio>>) -> Response {
     .await;
     match result {
         Ok(path) => Json(json!({"saved": path.display().to_string()})).into_response(),
-        Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, cli_words(e)),
+        Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, format!("{e:#}")),
     }
 }
 
@@ -1098,7 +1116,7 @@ async fn write(State(studio): State<Arc<Studio>>, Query(q): Query<WriteQuery>) -
                 "kind": "error",
                 "what": what,
                 "refusal": e.downcast_ref::<RunError>().is_some_and(RunError::is_refusal),
-                "message": cli_words(e),
+                "message": page_words(e, &rev.spec.origin),
             }),
         };
         studio.writing.store(false, Ordering::Release);

@@ -161,7 +161,7 @@ function showDraft() {
     if (!field) continue;
     field.classList.add("invalid");
     const doc = studio.keys.find((d) => d.key === key);
-    field.querySelector(".error").textContent = message + (doc ? `\n  Range: ${doc.range}${doc.unit ? " " + doc.unit : ""}` : "");
+    field.querySelector(".error").textContent = message + (doc ? `\nAllowed${doc.unit ? ` (${doc.unit})` : ""}: ${doc.range}` : "");
     const input = inputOf(key);
     if (input && text !== undefined) input.value = text;
   }
@@ -172,14 +172,22 @@ function showDraft() {
     : "";
 }
 
+// An error as the form shows it: the value, the problem and the fix, in
+// the page's words; no command-line prefix, no file path. At its field the
+// key is the field's label; elsewhere it leads.
+function errorText(e, atField) {
+  const value = e.value === null || e.value === undefined ? "" : `${e.value}: `;
+  const lead = !atField && e.key ? `${e.key} = ${value}` : value;
+  return `${lead}${e.message}${e.fix ? `.\nFix: ${e.fix}` : ""}`;
+}
+
 // `edited`: the keys the refused request set; those the errors do not name
 // (kind = "formula", refused for its missing z) join the draft too.
 function showErrors(errors, edited = []) {
   for (const e of errors) {
-    const text = e.cli || e.message;
     if (e.key && document.querySelector(`.field[data-key="${e.key}"]`)) {
       const input = inputOf(e.key);
-      studio.refused.set(e.key, { text: input ? input.value : undefined, message: text });
+      studio.refused.set(e.key, { text: input ? input.value : undefined, message: errorText(e, true) });
     }
   }
   const named = errors.map((e) => e.key).filter(Boolean);
@@ -192,7 +200,7 @@ function showErrors(errors, edited = []) {
   showDraft();
   showApplicableFields();
   const unplaced = errors.filter((e) => !e.key || !document.querySelector(`.field[data-key="${e.key}"]`));
-  if (unplaced.length) $("spec-error").textContent = unplaced.map((e) => e.cli || e.message).join("\n");
+  if (unplaced.length) $("spec-error").textContent = unplaced.map((e) => errorText(e, false)).join("\n");
   for (const e of errors) {
     const field = e.key && document.querySelector(`.field[data-key="${e.key}"]`);
     if (field) { field.scrollIntoView({ block: "nearest" }); break; }

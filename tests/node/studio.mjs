@@ -89,7 +89,11 @@ try {
     { timeout: 30000 },
   );
   const error = await page.locator('.field[data-key="lens.afov"] .error').textContent();
-  check(error.includes("lens.afov") && error.includes("200"), `afov = 200 is refused at the field: ${JSON.stringify(error.split("\n")[0])}`);
+  // in the page's words: the value, the problem, the fix and the range with
+  // its unit in front; no command-line prefix, no file path
+  check(error.startsWith("200: ") && error.includes("\nFix: ") && /\nAllowed \(.+\): /.test(error)
+    && !error.includes("error:") && !error.includes(".toml") && !error.includes("`"),
+    `afov = 200 is refused at the field, in the page's words: ${JSON.stringify(error)}`);
   const state = await (await page.request.get(url + "api/state")).json();
   check(state.values.lens.afov === 60, "the last good design stays (lens.afov = 60)");
 

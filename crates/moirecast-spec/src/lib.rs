@@ -368,6 +368,19 @@ enum ProfileKind {
     Flat,
 }
 
+impl ProfileKind {
+    /// The kind as the spec writes it.
+    fn name(self) -> &'static str {
+        match self {
+            ProfileKind::Image => "image",
+            ProfileKind::Rings => "rings",
+            ProfileKind::Ramp => "ramp",
+            ProfileKind::Bump => "bump",
+            ProfileKind::Flat => "flat",
+        }
+    }
+}
+
 #[derive(Deserialize, Serialize, Debug, Clone, Copy, PartialEq)]
 #[serde(rename_all = "kebab-case")]
 enum ModeKey {
@@ -898,7 +911,7 @@ fn profile(
                 file,
                 "profile.image",
                 format!("{img:?}"),
-                format!("is given together with kind = {k:?}"),
+                format!("is given together with kind = \"{}\"", k.name()),
                 "remove one of profile.kind and profile.image",
             ))
         }
