@@ -336,12 +336,23 @@ function showLightPickers() {
   $("light-b").hidden = !custom || printed();
 }
 
+const degrees = (x) => `${Number(x).toFixed(2)}°`;
+
+// While a frame is wanted that is not on screen, the view says so; the
+// labels by the sliders always name the frame on screen.
+function showFrameState() {
+  const wanted = frameInFlight || framePending;
+  $("frame").classList.toggle("pending", Boolean(wanted));
+  $("frame-state").textContent = wanted
+    ? `rendering tilt ${degrees($("tilt").value)}, along ${degrees($("along").value)}…`
+    : "";
+}
+
 async function requestFrame(samples = 4) {
-  if (frameInFlight) { framePending = Math.max(framePending || 0, samples); return; }
+  if (frameInFlight) { framePending = Math.max(framePending || 0, samples); showFrameState(); return; }
   frameInFlight = true; framePending = null;
+  showFrameState();
   const tilt = $("tilt").value, along = $("along").value;
-  $("tilt-value").textContent = `${Number(tilt).toFixed(2)}°`;
-  $("along-value").textContent = `${Number(along).toFixed(2)}°`;
   const params = new URLSearchParams({ tilt, along, size: "256", samples: String(samples), lights: lightsParam() });
   try {
     const response = await api("/api/frame.png?" + params);
@@ -354,7 +365,10 @@ async function requestFrame(samples = 4) {
       studio.frames += 1;
       studio.lastFrameMs = h("x-render-ms");
       $("frame").dataset.tilt = tilt;
+      $("frame").dataset.along = along;
       $("frame").dataset.samples = samples;
+      $("tilt-value").textContent = degrees(tilt);
+      $("along-value").textContent = degrees(along);
       $("scores").textContent = `contrast ${h("x-contrast").toFixed(3)} · fidelity ${h("x-fidelity").toFixed(3)} · local ${h("x-local-fidelity").toFixed(3)} · ${h("x-render-ms").toFixed(0)} ms, ${samples * samples} lens phases`;
     } else if (response.status !== 409) {
       const body = await response.json().catch(() => ({}));
@@ -363,6 +377,7 @@ async function requestFrame(samples = 4) {
   } finally {
     frameInFlight = false;
     if (framePending) requestFrame(framePending);
+    else showFrameState();
   }
 }
 

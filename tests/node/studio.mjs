@@ -60,6 +60,23 @@ try {
   const after = await page.locator("#frame").screenshot();
   check(!before.equals(after), "moving the tilt slider changes the frame");
 
+  // while a frame is pending the view says so, and the labels keep naming
+  // the frame on screen until the new one shows (frames held back 700 ms)
+  await page.route("**/api/frame.png*", async (route) => { await new Promise((r) => setTimeout(r, 700)); await route.continue(); });
+  const beforeSlow = await page.evaluate(() => window.studio.frames);
+  await page.locator("#along").fill("5");
+  await page.locator("#along").dispatchEvent("change");
+  await page.waitForFunction(() => document.getElementById("frame").classList.contains("pending"), null, { timeout: 5000 });
+  const pending = await page.evaluate(() => ({ state: document.getElementById("frame-state").textContent, label: document.getElementById("along-value").textContent }));
+  await page.waitForFunction(([n]) => window.studio.frames > n && !document.getElementById("frame").classList.contains("pending"), [beforeSlow], { timeout: 60000 });
+  const shownSlow = await page.evaluate(() => ({ label: document.getElementById("along-value").textContent, along: document.getElementById("frame").dataset.along, state: document.getElementById("frame-state").textContent }));
+  check(pending.state.includes("along 5.00°") && pending.label === "0.00°" && shownSlow.label === "5.00°" && shownSlow.along === "5" && shownSlow.state === "",
+    `a pending frame is marked and named; the label follows the frame on screen: ${JSON.stringify([pending, shownSlow])}`);
+  await page.unroute("**/api/frame.png*");
+  await page.locator("#along").fill("0");
+  await page.locator("#along").dispatchEvent("change");
+  await page.waitForFunction(() => document.getElementById("frame").dataset.along === "0", null, { timeout: 60000 });
+
   // the compensation toggle: off, the design is today's uncompensated base
   // and the frame changes; on again, back to the design view's picture
   const compensated = await page.locator("#frame").screenshot();
