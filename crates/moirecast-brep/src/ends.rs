@@ -34,7 +34,8 @@
 //! 6787 mm³ over such short spans.)
 
 use crate::lenses::LensFamily;
-use glam::{DVec3, DVec4};
+use crate::patch::LensPatch;
+use glam::DVec3;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use truck_modeling::{
@@ -226,105 +227,6 @@ fn departure(surface: &NurbsSurface<Vector4>, ended: &NurbsSurface<Vector4>, end
     farthest
 }
 
-/// A point of a lens surface and its tangents across (∂/∂t) and along
-/// (∂/∂v).
-struct Tangents {
-    point: DVec3,
-    across: DVec3,
-    along: DVec3,
-}
-
-/// A lens surface (a rational quadratic across, a cubic B-spline along)
-/// read directly: truck's general evaluation allocates at every call, and
-/// took 80 ms for the samples of the reference's four ends.
-struct LensPatch<'s> {
-    knots: Vec<f64>,
-    rows: &'s [Vec<Vector4>],
-}
-
-impl<'s> LensPatch<'s> {
-    fn of(surface: &'s NurbsSurface<Vector4>) -> Self {
-        LensPatch {
-            knots: surface.vknot_vec().to_vec(),
-            rows: surface.control_points(),
-        }
-    }
-
-    /// The point at (t, v) and its tangents (v is clamped into the knots'
-    /// last span at the ends, where the cubic extrapolates).
-    fn at(&self, t: f64, v: f64) -> Tangents {
-        let (first, basis, slope) = cubic_basis(&self.knots, v);
-        let row = |r: usize| -> (DVec4, DVec4) {
-            let c = &self.rows[r][first..first + 4];
-            let h = |w: &[f64; 4]| {
-                (0..4).fold(DVec4::ZERO, |acc, j| {
-                    acc + DVec4::new(c[j].x, c[j].y, c[j].z, c[j].w) * w[j]
-                })
-            };
-            (h(&basis), h(&slope))
-        };
-        let rows: Vec<(DVec4, DVec4)> = (0..self.rows.len()).map(row).collect();
-        debug_assert_eq!(rows.len(), 3, "one rational quadratic across");
-        let s = 1.0 - t;
-        let (b, db) = (
-            [s * s, 2.0 * s * t, t * t],
-            [-2.0 * s, 2.0 - 4.0 * t, 2.0 * t],
-        );
-        let sum = |w: [f64; 3], pick: fn(&(DVec4, DVec4)) -> DVec4| {
-            (0..3).fold(DVec4::ZERO, |acc, r| acc + pick(&rows[r]) * w[r])
-        };
-        let (h, h_t, h_v) = (sum(b, |r| r.0), sum(db, |r| r.0), sum(b, |r| r.1));
-        let point = h.truncate() / h.w;
-        let derivative = |d: DVec4| (d.truncate() - point * d.w) / h.w;
-        Tangents {
-            point,
-            across: derivative(h_t),
-            along: derivative(h_v),
-        }
-    }
-}
-
-/// The cubic B-spline basis at `v` over clamped `knots`: the first control
-/// point it weighs, its four weights and their derivatives (the NURBS
-/// Book, A2.2 and A2.3).
-fn cubic_basis(knots: &[f64], v: f64) -> (usize, [f64; 4], [f64; 4]) {
-    const P: usize = 3;
-    let n = knots.len() - P - 1; // control points
-    let span = (knots.partition_point(|&k| k <= v).max(P + 1) - 1).min(n - 1);
-    let (mut left, mut right) = ([0.0; P + 1], [0.0; P + 1]);
-    // ndu[j][r]: basis functions (upper triangle) and knot differences
-    let mut ndu = [[0.0; P + 1]; P + 1];
-    ndu[0][0] = 1.0;
-    for j in 1..=P {
-        left[j] = v - knots[span + 1 - j];
-        right[j] = knots[span + j] - v;
-        let mut saved = 0.0;
-        for r in 0..j {
-            ndu[j][r] = right[r + 1] + left[j - r];
-            let temp = ndu[r][j - 1] / ndu[j][r];
-            ndu[r][j] = saved + right[r + 1] * temp;
-            saved = left[j - r] * temp;
-        }
-        ndu[j][j] = saved;
-    }
-    let basis = std::array::from_fn(|j| ndu[j][P]);
-    // first derivatives: p · (N_{j,p−1}/Δ_j − N_{j+1,p−1}/Δ_{j+1})
-    let slope = std::array::from_fn(|r| {
-        let below = if r >= 1 {
-            ndu[r - 1][P - 1] / ndu[P][r - 1]
-        } else {
-            0.0
-        };
-        let above = if r < P {
-            ndu[r][P - 1] / ndu[P][r]
-        } else {
-            0.0
-        };
-        P as f64 * (below - above)
-    });
-    (span - P, basis, slope)
-}
-
 /// The knot nearest `end_knot` on the inside: where the moved span begins.
 fn inner_knot(knots: &truck_modeling::KnotVec, end_knot: f64, end: End) -> f64 {
     let inside = knots.iter().copied().filter(|&k| k != end_knot);
@@ -493,7 +395,7 @@ mod tests {
         let dm = mesh_device(&design, &Silent).unwrap();
         let brep = build_brep(&design, &dm).unwrap();
         for surface in brep.base.surfaces.values().take(3) {
-            let patch = super::LensPatch::of(surface);
+            let patch = crate::patch::LensPatch::of(surface);
             let (_, (v0, v1)) = surface.range_tuple();
             for i in 0..=20 {
                 let v = v0 + (v1 - v0) * i as f64 / 20.0;

@@ -29,6 +29,7 @@ pub mod ends;
 pub mod error;
 pub mod lenses;
 pub mod mold;
+mod patch;
 pub mod printed;
 pub mod solid;
 pub mod spline;

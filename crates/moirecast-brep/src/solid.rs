@@ -19,6 +19,7 @@ use crate::ends::{end_in_wall, iso_edge, End, WallCut, WallEnds, WallPlane, END_
 use crate::error::BrepError;
 pub use crate::lenses::FIT_SHARE;
 use crate::lenses::{worst_deviation, Array, LensFamily};
+use crate::patch::LensPatch;
 use crate::spline::{chord_lengths, clamped_knots, interpolate};
 use crate::topology::{pieces, Piece, Run};
 use glam::DVec3;
@@ -88,7 +89,14 @@ pub(crate) fn point3(p: DVec3) -> Point3 {
 pub(crate) fn lens_params(surface: &NurbsSurface<Vector4>, p: DVec3, within: f64) -> (f64, f64) {
     let target = point3(p);
     let distance = |(u, v): (f64, f64)| surface.subs(u, v).distance(target);
-    let first = surface.search_nearest_parameter(target, None, 100);
+    // truck's own search, its presearch read off the lens directly (a
+    // tenth of the time: each grid column's section once)
+    let first = if LensPatch::fits(surface) {
+        let hint = LensPatch::of(surface).presearch(p, surface.range_tuple(), PRESEARCH_DIVISION);
+        surface.search_nearest_parameter(target, Some(hint), 100)
+    } else {
+        surface.search_nearest_parameter(target, None, 100)
+    };
     if let Some(uv) = first.filter(|&uv| distance(uv) <= within) {
         return uv;
     }
@@ -123,6 +131,9 @@ pub(crate) fn lens_params(surface: &NurbsSurface<Vector4>, p: DVec3, within: f64
         .min_by(nearest)
         .unwrap_or(grid)
 }
+
+/// truck's presearch grid: 50 divisions of each parameter.
+const PRESEARCH_DIVISION: usize = 50;
 
 /// Samples in every knot span of the grid [`lens_params`] starts from
 /// where truck's own presearch is too coarse.
