@@ -120,6 +120,9 @@ pub const END_SHARE: f64 = 0.1;
 /// cut from; the family's deviation grows by the farthest sample. Returns
 /// whether it did.
 pub fn end_in_wall(family: &mut LensFamily, cut: &WallCut, allowance: f64) -> bool {
+    if !family.surfaces.values().all(LensPatch::fits) {
+        return false; // band spans of several pieces across
+    }
     let budget = allowance;
     let ended: Option<Vec<(i64, NurbsSurface<Vector4>, f64)>> = family
         .surfaces

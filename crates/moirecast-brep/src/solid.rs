@@ -601,7 +601,12 @@ fn wall_cuts(design: &Design, dm: &DeviceMesh, pieces: &[Piece]) -> Vec<(Array, 
     }
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     let mut cuts = Vec::new();
-    for array in [Array::Revealer, Array::Base] {
+    // a printed base's band spans are no lenses: its walls trim them
+    let arrays = match design.params.base.kind {
+        moirecast_kernel::BaseKind::DualLens => &[Array::Revealer, Array::Base][..],
+        _ => &[Array::Revealer][..],
+    };
+    for &array in arrays {
         let key = |side: Side| (array as u8, side as u8);
         let (Some(front), Some(back)) = (
             on_wall.get(&key(Side::Front)),
