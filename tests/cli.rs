@@ -377,8 +377,11 @@ fn a_plane_seen_straight_down_builds_the_uncompensated_base() {
 
 /// `--mesher brep`: truck-meshalgo's tessellation of the B-rep becomes
 /// device.stl once it is cross-checked. A plane without base shift has no
-/// trimmed faces and passes (at 2 µm); the saddle's trimmed faces do not,
-/// and the failed check is named and nothing is written.
+/// trimmed faces and passes (at 2 µm); so does the small saddle, whose
+/// lenses end in its front and back walls and whose side walls meet the
+/// lenses at creases. Three levels of base shift make the side walls trim
+/// base lenses, which truck-meshalgo leaves open: the failed check is
+/// named and nothing is written.
 #[test]
 fn the_brep_mesher_is_cross_checked_before_it_is_written() {
     let flat = SMALL
@@ -406,6 +409,14 @@ fn the_brep_mesher_is_cross_checked_before_it_is_written() {
 
     let dir = scratch("brep-saddle");
     let (ok, err, out) = run_with(&["device", "--mesher", "brep"], SMALL, &dir);
+    assert!(ok, "{err}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    assert!(report["crosscheck"]["hausdorff_mm"].as_f64().unwrap() <= 2.0 * 0.004);
+
+    let trimmed = SMALL.replace("levels = 1.0", "levels = 3.0");
+    let dir = scratch("brep-trimmed");
+    let (ok, err, out) = run_with(&["device", "--mesher", "brep"], &trimmed, &dir);
     assert!(!ok && err.contains("check `brep-mesh-"), "{err}");
     assert!(!out.exists(), "nothing is written");
 }
