@@ -239,18 +239,26 @@ fn inner_knot(knots: &truck_modeling::KnotVec, end_knot: f64, end: End) -> f64 {
     }
 }
 
-/// The end iso-curve of an ended `surface` at `end`, across from `t[0]`
-/// to `t[1]`: a crease's end (t = 0 or 1) as it is, any other end moved to
-/// where the iso-curve crosses the nearest of `sides` (the walls along the
-/// lenses) to its mesh point `at`, if one lies within `within` (mm). Its
-/// ends place its vertices.
+/// Where a lens–wall edge starts and ends: each end's parameter across
+/// the lens, and its mesh point.
+pub(crate) struct RunEnds {
+    pub t: [f64; 2],
+    pub at: [DVec3; 2],
+}
+
+/// The end iso-curve of an ended `surface` at `end`, across from
+/// `ends.t[0]` to `ends.t[1]`: a crease's end (t = 0 or 1) as it is, any
+/// other end moved to where the iso-curve crosses the nearest of `sides`
+/// (the walls along the lenses) to its mesh point, if one lies within
+/// `within` (mm). Its ends place its vertices.
 pub(crate) fn iso_edge(
     surface: &NurbsSurface<Vector4>,
     end: End,
-    (t, at): ([f64; 2], [DVec3; 2]),
+    ends: RunEnds,
     sides: &[WallPlane],
     within: f64,
 ) -> Curve {
+    let RunEnds { t, at } = ends;
     let columns = surface.control_points()[0].len();
     let column = match end {
         End::First => 0,

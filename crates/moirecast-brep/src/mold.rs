@@ -21,7 +21,7 @@
 //! region mesh's positions (f32, as the STL halves).
 
 use crate::channels;
-use crate::ends::{into_plane, iso_edge, End, WallEnds, WallPlane};
+use crate::ends::{into_plane, iso_edge, End, RunEnds, WallEnds, WallPlane};
 use crate::error::BrepError;
 use crate::lenses::LensFamily;
 use crate::solid::{
@@ -917,7 +917,10 @@ fn edge_curve<'s>(
                     Ok(EdgeCurve::fixed(iso_edge(
                         surface,
                         end,
-                        ([a.x, b.x], ends_at),
+                        RunEnds {
+                            t: [a.x, b.x],
+                            at: ends_at,
+                        },
                         &sides,
                         frame.tolerance,
                     )))

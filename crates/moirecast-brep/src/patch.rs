@@ -7,6 +7,9 @@
 use glam::{DVec3, DVec4};
 use truck_modeling::{NurbsSurface, Vector4};
 
+/// A surface's parameter ranges: across (t), along (v).
+pub(crate) type Domain = ((f64, f64), (f64, f64));
+
 /// A point of a lens surface and its tangents across (∂/∂t) and along
 /// (∂/∂v).
 pub(crate) struct Tangents {
@@ -58,12 +61,8 @@ impl<'s> LensPatch<'s> {
     /// truck's presearch for the point nearest `target` (the nearest of a
     /// (division + 1)² grid over `range`, the first of equals in truck's
     /// order: u outer, v inner), each grid column's section computed once.
-    pub fn presearch(
-        &self,
-        target: DVec3,
-        ((u0, u1), (v0, v1)): ((f64, f64), (f64, f64)),
-        division: usize,
-    ) -> (f64, f64) {
+    pub fn presearch(&self, target: DVec3, domain: Domain, division: usize) -> (f64, f64) {
+        let ((u0, u1), (v0, v1)) = domain;
         let at = |i: usize, lo: f64, hi: f64| {
             let p = i as f64 / division as f64;
             lo * (1.0 - p) + hi * p

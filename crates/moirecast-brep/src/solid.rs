@@ -15,7 +15,7 @@
 //! directions, so the shell is closed by construction; `ShellCondition`
 //! measures that.
 
-use crate::ends::{end_in_wall, iso_edge, End, WallCut, WallEnds, WallPlane, END_SHARE};
+use crate::ends::{end_in_wall, iso_edge, End, RunEnds, WallCut, WallEnds, WallPlane, END_SHARE};
 use crate::error::BrepError;
 pub use crate::lenses::FIT_SHARE;
 use crate::lenses::{worst_deviation, Array, LensFamily};
@@ -210,7 +210,7 @@ pub fn build_brep(design: &Design, dm: &DeviceMesh) -> Result<DeviceBrep, BrepEr
         &pieces,
         &dm.mesh.positions,
         |piece| lens_of(piece.patch).is_none(),
-        |piece, other, run| edge_curve(design, dm, (piece, other, run), &lenses),
+        |piece, other, run| edge_curve(design, dm, Between { piece, other, run }, &lenses),
         |piece, wires| make_face(design, dm, piece, wires, &surface_of),
     )?;
     let (edge_count, vertex_count) = (assembled.edges, assembled.vertices);
@@ -504,14 +504,22 @@ struct Lenses<'s> {
     ends_of: &'s dyn Fn(LensRef) -> WallEnds,
 }
 
-/// The curve of the edge along `run` (from its first vertex to its last),
-/// seen from `piece`; `other` is the piece across it.
+/// A boundary run and the two pieces it lies between.
+struct Between<'a> {
+    piece: &'a Piece,
+    other: &'a Piece,
+    run: &'a Run,
+}
+
+/// The curve of the edge along `between.run` (from its first vertex to its
+/// last), seen from `between.piece`; `between.other` is the piece across it.
 fn edge_curve(
     design: &Design,
     dm: &DeviceMesh,
-    (piece, other, run): (&Piece, &Piece, &Run),
+    between: Between,
     lenses: &Lenses,
 ) -> Result<EdgeCurve, BrepError> {
+    let Between { piece, other, run } = between;
     let at = |v: u32| dm.mesh.positions[v as usize];
     let (Some(lens), other_patch) = (lens_of(piece.patch), other.patch) else {
         // wall against wall: a vertical corner line
@@ -559,7 +567,10 @@ fn edge_curve(
         return Ok(EdgeCurve::fixed(iso_edge(
             (lenses.surface_of)(lens),
             end,
-            ([first.x, last.x], ends_at),
+            RunEnds {
+                t: [first.x, last.x],
+                at: ends_at,
+            },
             &sides,
             design.tolerance.mm(),
         )));
