@@ -163,7 +163,6 @@ fn distance_to_exact(
     surface: &truck_modeling::NurbsSurface<truck_modeling::Vector4>,
     (t, v): (f64, f64),
 ) -> f64 {
-    use truck_modeling::ParametricSurface;
     let p = surface.subs(t, v);
     let q = glam::DVec3::new(p.x, p.y, p.z);
     let mut station = v;
