@@ -257,6 +257,19 @@ def test_the_step_halves_and_the_cavity_do_not_overlap(molds):
     assert occ_common_volume(bottom, device) <= 1e-2
 
 
+VENT_ON_LENS = ROOT / "tests" / "python" / "specs" / "vent-on-lens-mold.toml"
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason="a vent standing on the lenses: BRepMesh leaves the lens face it cuts untriangulated (issue 48, open)")
+def test_a_vent_on_the_lenses_meshes_closed(molds):
+    """The mold's halves mesh closed where the vent stands on the lenses
+    (a dome peaking inside the outline): found with another seed of the
+    random designs below. Strict, so that the mark goes when the face
+    meshes."""
+    out, _ = molds(VENT_ON_LENS)
+    halves_mesh_closed(out, (0.05,))
+
+
 # A few random designs per run (MOIRECAST_OCC_SEED replays or varies them;
 # CI uses the fixed seed, so a failure reproduces).
 RANDOM_DESIGNS = 3
