@@ -50,10 +50,15 @@ impl<'s> LensPatch<'s> {
     /// The three homogeneous points of the section at station `v`.
     fn section(&self, v: f64) -> [DVec4; 3] {
         let (first, basis, _) = cubic_basis(&self.knots, v);
+        self.weighted(first, &basis)
+    }
+
+    /// Each row's four control points from `first` on, weighed by `w`.
+    fn weighted(&self, first: usize, w: &[f64; 4]) -> [DVec4; 3] {
         std::array::from_fn(|r| {
             let c = &self.rows[r][first..first + 4];
             (0..4).fold(DVec4::ZERO, |acc, j| {
-                acc + DVec4::new(c[j].x, c[j].y, c[j].z, c[j].w) * basis[j]
+                acc + DVec4::new(c[j].x, c[j].y, c[j].z, c[j].w) * w[j]
             })
         })
     }
@@ -90,26 +95,14 @@ impl<'s> LensPatch<'s> {
     /// last span at the ends, where the cubic extrapolates).
     pub fn at(&self, t: f64, v: f64) -> Tangents {
         let (first, basis, slope) = cubic_basis(&self.knots, v);
-        let row = |r: usize| -> (DVec4, DVec4) {
-            let c = &self.rows[r][first..first + 4];
-            let h = |w: &[f64; 4]| {
-                (0..4).fold(DVec4::ZERO, |acc, j| {
-                    acc + DVec4::new(c[j].x, c[j].y, c[j].z, c[j].w) * w[j]
-                })
-            };
-            (h(&basis), h(&slope))
-        };
-        let rows: Vec<(DVec4, DVec4)> = (0..self.rows.len()).map(row).collect();
-        debug_assert_eq!(rows.len(), 3, "one rational quadratic across");
+        let (rows, slopes) = (self.weighted(first, &basis), self.weighted(first, &slope));
         let s = 1.0 - t;
         let (b, db) = (
             [s * s, 2.0 * s * t, t * t],
             [-2.0 * s, 2.0 - 4.0 * t, 2.0 * t],
         );
-        let sum = |w: [f64; 3], pick: fn(&(DVec4, DVec4)) -> DVec4| {
-            (0..3).fold(DVec4::ZERO, |acc, r| acc + pick(&rows[r]) * w[r])
-        };
-        let (h, h_t, h_v) = (sum(b, |r| r.0), sum(db, |r| r.0), sum(b, |r| r.1));
+        let sum = |w: [f64; 3], h: &[DVec4; 3]| h[0] * w[0] + h[1] * w[1] + h[2] * w[2];
+        let (h, h_t, h_v) = (sum(b, &rows), sum(db, &rows), sum(b, &slopes));
         let point = h.truncate() / h.w;
         let derivative = |d: DVec4| (d.truncate() - point * d.w) / h.w;
         Tangents {
