@@ -165,7 +165,13 @@ class BRepMeshed:
         return self.open_edges == 0 and self.overused_edges == 0
 
     def pieces(self):
-        return len(self.mesh.split(only_watertight=False))
+        """Pieces joined across edges (without trimesh's split, which
+        repairs open pieces and needs networkx for it)."""
+        import numpy as np
+
+        graph = oracle("trimesh").graph
+        faces = np.arange(len(self.mesh.faces))
+        return len(graph.connected_components(self.mesh.face_adjacency, nodes=faces))
 
     def __str__(self):
         return f"{self.open_edges} open edges, {self.overused_edges} used more than twice"

@@ -16,11 +16,12 @@
 
 use crate::error::BrepError;
 use crate::solid::{cubic_through, point3};
+use crate::spline::chord_lengths;
 use glam::{DMat3, DVec3};
 use moirecast_mold::{ChannelAxis, ChannelShape};
 use truck_modeling::{
-    BSplineCurve, Curve, KnotVec, Line, NurbsCurve, NurbsSurface, ParametricSurface,
-    ParametricSurface3D, RevolutedCurve, Vector3, Vector4,
+    BSplineCurve, Curve, KnotVec, Line, NurbsCurve, NurbsSurface, ParametricCurve,
+    ParametricSurface, ParametricSurface3D, Point3, RevolutedCurve, Vector3, Vector4,
 };
 
 /// A channel's frame: a point of its axis (position 0), the axis's unit
@@ -73,6 +74,54 @@ pub(crate) fn radius_at(c: &ChannelShape, h: f64) -> f64 {
     let (h0, h1) = c.span;
     let (r0, r1) = c.radii;
     r0 + (r1 - r0) * (h - h0) / (h1 - h0)
+}
+
+/// How far `p` lies off `c`'s side (outside positive).
+pub(crate) fn off_side(c: &ChannelShape, f: &ChannelFrame, p: DVec3) -> f64 {
+    f.distance(p) - radius_at(c, f.along(p))
+}
+
+/// Where the crease at across parameter `t` of `lens` crosses the side of
+/// one of `shapes`, near along parameter `v` (a mesh vertex's, within
+/// `within` mm of the side): the along parameter solved by secant steps to
+/// [`SOLVED_MM`]. `None` where no side passes that near, or the steps do
+/// not settle. A channel's vertex on a crease goes there, so that its edges
+/// along the crease and along the side meet on both surfaces (found: a vent
+/// on the lenses whose corner lay 3.6 µm off the vent, and OpenCascade's
+/// mesher left the lens face beside it untriangulated).
+pub(crate) fn crease_crossing(
+    shapes: &[ChannelShape],
+    lens: &NurbsSurface<Vector4>,
+    (t, v): (f64, f64),
+    within: f64,
+) -> Option<f64> {
+    let at = |v: f64| {
+        let q = lens.subs(t, v);
+        DVec3::new(q.x, q.y, q.z)
+    };
+    let (shape, f) = shapes.iter().map(|c| (c, frame(c))).min_by(|a, b| {
+        let off = |(c, f): &(&ChannelShape, ChannelFrame)| off_side(c, f, at(v)).abs();
+        off(a).total_cmp(&off(b))
+    })?;
+    let g = |v: f64| off_side(shape, &f, at(v));
+    if g(v).abs() > within {
+        return None;
+    }
+    let (mut a, mut b) = (v, v + 1e-4);
+    let (mut ga, mut gb) = (g(a), g(b));
+    for _ in 0..SOLVE_STEPS {
+        if gb.abs() < SOLVED_MM {
+            return Some(b);
+        }
+        if gb == ga {
+            break;
+        }
+        let next = b - gb * (b - a) / (gb - ga);
+        (a, ga) = (b, gb);
+        b = next;
+        gb = g(b);
+    }
+    (gb.abs() < SOLVED_MM).then_some(b)
 }
 
 /// The point of `c`'s exact side at `angle` and position `h`.
@@ -324,6 +373,15 @@ pub(crate) fn piece_bounds(len: usize, breaks: &[usize]) -> Vec<usize> {
     bounds
 }
 
+/// How far a channel's edge may lie from the exact crossing of its two
+/// surfaces, as a share of the tolerance. OpenCascade's mesher leaves a face
+/// untriangulated where an edge lies microns off it (a vent on the lenses,
+/// `tests/python/specs/vent-on-lens-mold.toml`: 5.9 µm), so the edge is held
+/// far below the tolerance.
+pub const EDGE_SHARE: f64 = 1e-4;
+/// How many times an edge's points may be doubled where it is off.
+const REFINE_ROUNDS: usize = 8;
+
 /// The edge through the exact points `pts` (in order), C² between breaks
 /// and C⁰ at the indices in `breaks`: cubic pieces, each through its
 /// points, joined end to end in one B-spline.
@@ -337,4 +395,49 @@ pub(crate) fn piecewise_cubic(pts: &[DVec3], breaks: &[usize]) -> Curve {
         3,
     );
     Curve::BSplineCurve(BSplineCurve::new(knots, ctrl))
+}
+
+/// The C² cubic through the exact points `pts` (in order), with more
+/// exact points from `solve` (a point near the crossing to the crossing)
+/// in each span whose middle lies farther than `within` from its solved
+/// point, for at most [`REFINE_ROUNDS`] rounds: what the middles of the
+/// spans guarantee, checked there.
+pub(crate) fn refined_cubic(
+    pts: Vec<DVec3>,
+    solve: impl Fn(DVec3) -> Result<DVec3, BrepError>,
+    within: f64,
+) -> Result<Curve, BrepError> {
+    Ok(Curve::BSplineCurve(refined(pts, &solve, within)?))
+}
+
+/// The cubic through `pts`, with a solved point added in each span whose
+/// middle lies farther than `within` from the crossing.
+fn refined(
+    mut pts: Vec<DVec3>,
+    solve: &impl Fn(DVec3) -> Result<DVec3, BrepError>,
+    within: f64,
+) -> Result<BSplineCurve<Point3>, BrepError> {
+    for round in 0.. {
+        let cubic = cubic_through(&pts, |p| p);
+        if round == REFINE_ROUNDS {
+            return Ok(cubic);
+        }
+        let s = chord_lengths(&pts);
+        let mut more = Vec::with_capacity(2 * pts.len());
+        for (i, &p) in pts.iter().enumerate().take(pts.len() - 1) {
+            more.push(p);
+            let m = cubic.subs(0.5 * (s[i] + s[i + 1]));
+            let mid = DVec3::new(m.x, m.y, m.z);
+            let on = solve(mid)?;
+            if on.distance(mid) > within {
+                more.push(on);
+            }
+        }
+        more.push(pts[pts.len() - 1]);
+        if more.len() == pts.len() {
+            return Ok(cubic);
+        }
+        pts = more;
+    }
+    unreachable!("the rounds end at REFINE_ROUNDS")
 }

@@ -401,7 +401,7 @@ mod tests {
 
     #[test]
     fn a_lens_patch_reads_as_truck_evaluates() {
-        use truck_modeling::{BoundedSurface, ParametricSurface};
+        use truck_modeling::BoundedSurface;
         let design = small_saddle();
         let dm = mesh_device(&design, &Silent).unwrap();
         let brep = build_brep(&design, &dm).unwrap();

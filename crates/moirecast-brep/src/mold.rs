@@ -380,13 +380,23 @@ fn build<'a>(
         })
         .collect();
     let frame = frame;
+    let crossings = crease_crossings(
+        &pieces,
+        mesh,
+        &|v| device_vertex(v).filter(|&d| (d as usize) < dm.mesh.positions.len()),
+        &posed_surfaces,
+        &frame,
+    );
     // a vertex's parameters on a lens: its device vertex's, or, where a
-    // channel made it, found on the lens's surface
+    // channel made it, its crease crossing or found on the lens's surface
     let params = |v: u32, lens: LensRef| -> Result<glam::DVec2, BrepError> {
         let known = device_vertex(v)
             .filter(|&d| (d as usize) < dm.mesh.positions.len())
             .and_then(|d| dm.origins[d as usize].params_on(lens));
         if let Some(uv) = known {
+            return Ok(uv);
+        }
+        if let Some(&uv) = crossings.get(&(v, lens)) {
             return Ok(uv);
         }
         let p = mesh.positions[v as usize];
@@ -456,6 +466,83 @@ fn build<'a>(
         rings,
         fit,
     })
+}
+
+/// Where the lens's parameters `(u, w)` of a channel's vertex `p` (which
+/// no device vertex placed) lie on a crease: the crease's exact crossing
+/// with the channel's side ([`channels::crease_crossing`]). The mesh's
+/// chord puts such a vertex beside the crease (across parameters to 0.01
+/// off it where the lens is steep, found-84f9858ee9297332), so a crease is
+/// recognised in space: within twice the tolerance of `p`. `None` off the
+/// creases.
+fn on_crease_crossing(
+    surface: &NurbsSurface<Vector4>,
+    p: DVec3,
+    (u, w): (f64, f64),
+    frame: &Frame,
+) -> Option<glam::DVec2> {
+    /// How far across a vertex may lie from a crease and still be on it.
+    const ACROSS: f64 = 0.05;
+    let t = [0.0, 1.0].into_iter().find(|t| (u - t).abs() < ACROSS)?;
+    let near = 2.0 * frame.tolerance;
+    let at = |w: f64| {
+        let q = surface.subs(t, w);
+        DVec3::new(q.x, q.y, q.z)
+    };
+    if at(w).distance(p) > near {
+        return None;
+    }
+    let crossing = channels::crease_crossing(frame.channels, surface, (t, w), near);
+    // inside the surface's own span (a lens ended in a wall ends there)
+    let (_, (first, last)) = truck_modeling::BoundedSurface::range_tuple(surface);
+    crossing
+        .filter(|&w| (first..=last).contains(&w) && at(w).distance(p) <= near)
+        .map(|w| glam::DVec2::new(t, w))
+}
+
+/// The lens parameters of every channel vertex (one no device vertex
+/// placed) at a run's end on a lens piece that lies on a crease:
+/// [`on_crease_crossing`]. Where two vertices of one crease find the same
+/// crossing (the mesh's run zigzags across the crease where the exact side
+/// crosses it once, found with random design seed 7), neither moves: the
+/// edge between them would have no length.
+fn crease_crossings(
+    pieces: &[Piece<RegionFace>],
+    mesh: &Mesh,
+    device_vertex: &dyn Fn(u32) -> Option<u32>,
+    surfaces: &HashMap<LensRef, NurbsSurface<Vector4>>,
+    frame: &Frame,
+) -> HashMap<(u32, LensRef), glam::DVec2> {
+    let mut found: HashMap<(u32, LensRef), glam::DVec2> = HashMap::new();
+    for piece in pieces {
+        let RegionFace::Lens(lens) = piece.patch else {
+            continue;
+        };
+        let surface = &surfaces[&lens];
+        for v in piece.loops.iter().flatten().map(|run| run.vertices[0]) {
+            if device_vertex(v).is_some() || found.contains_key(&(v, lens)) {
+                continue;
+            }
+            let p = mesh.positions[v as usize];
+            let uw = crate::solid::lens_params(surface, p, frame.tolerance);
+            if let Some(uv) = on_crease_crossing(surface, p, uw, frame) {
+                found.insert((v, lens), uv);
+            }
+        }
+    }
+    let shared: Vec<(u32, LensRef)> = found
+        .iter()
+        .filter(|&(&(v, lens), uv)| {
+            found
+                .iter()
+                .any(|(&(w, other), xy)| w != v && other == lens && uv.distance(*xy) < 1e-9)
+        })
+        .map(|(&key, _)| key)
+        .collect();
+    for key in shared {
+        found.remove(&key);
+    }
+    found
 }
 
 /// [`Fit`]: each triangle's vertices against the exact surface of its
@@ -873,10 +960,20 @@ fn edge_curve<'s>(
         (RegionFace::ChannelSide(..) | RegionFace::ChannelEnd(_), _)
             | (_, RegionFace::ChannelSide(..) | RegionFace::ChannelEnd(_))
     ) {
-        return if collinear(&pts) {
+        // a side's crossing with a lens is curved however few points its
+        // run has (a straight one across a lens's sliver lay 1.8 µm off it)
+        let on_lens = matches!(
+            pair,
+            (RegionFace::ChannelSide(..), Lens(_)) | (Lens(_), RegionFace::ChannelSide(..))
+        );
+        return if collinear(&pts) && !on_lens {
             Ok(line().into())
         } else {
-            channel_edge(frame, pair, &pts, lens_ends, mids).map(EdgeCurve::from)
+            let curve = channel_edge(frame, pair, &pts, lens_ends, mids)?;
+            Ok(match on_lens {
+                true => EdgeCurve::solved(curve),
+                false => curve.into(),
+            })
         };
     }
     match pair {
@@ -906,7 +1003,7 @@ fn edge_curve<'s>(
                 })?;
             Ok(EdgeCurve::fixed(Curve::BSplineCurve(crease_curve(
                 surface, t, a.y, b.y,
-            ))))
+            )?)))
         }
         (Lens(lens), DeviceWall(w)) | (DeviceWall(w), Lens(lens)) => {
             let (a, b, surface) = lens_ends(lens)?;
@@ -984,6 +1081,10 @@ fn channel_edge<'s>(
         (ChannelSide(k, _), o) | (o, ChannelSide(k, _)) => (k, o),
         _ => return Err(refuse()),
     };
+    if let Lens(lens) = other {
+        let (a, b, surface) = lens_ends(lens)?;
+        return side_across_lens(&shapes[k], pts, surface, [a, b], frame.tolerance);
+    }
     let fk = channels::frame(&shapes[k]);
     let section = || Ok(channels::section_arc(&shapes[k], fk.along(pts[0]), pts));
     // planes across the axis, and coaxial sides: circles
@@ -1043,21 +1144,6 @@ fn channel_edge<'s>(
     let plane_normal = |w: Wall| w.outward().extend(0.0);
     let mut breaks = Vec::new();
     let implicit: Box<dyn Fn(DVec3) -> f64> = match other {
-        Lens(lens) => {
-            let (_, _, surface) = lens_ends(lens)?;
-            let solved = pts
-                .iter()
-                .map(|&p| {
-                    channels::solve_on_side(
-                        shape,
-                        &f,
-                        &channels::Other::Lens(surface, frame.tolerance),
-                        p,
-                    )
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            return Ok(channels::piecewise_cubic(&solved, &[]));
-        }
         DeviceWall(w) | Block(RegionSurface::Side(w)) => {
             let (o, n) = (pts[0], plane_normal(w));
             Box::new(move |x: DVec3| (x - o).dot(n))
@@ -1102,11 +1188,41 @@ fn channel_edge<'s>(
         }
         _ => return Err(refuse()),
     };
+    let on_other = channels::Other::Implicit(&*implicit);
     let solved = pts
         .iter()
-        .map(|&p| channels::solve_on_side(shape, &f, &channels::Other::Implicit(&*implicit), p))
+        .map(|&p| channels::solve_on_side(shape, &f, &on_other, p))
         .collect::<Result<Vec<_>, _>>()?;
     Ok(channels::piecewise_cubic(&solved, &breaks))
+}
+
+/// Where the side of channel `shape` crosses a lens, along the mesh points
+/// `pts`: the cubic through points solved onto both, refined to
+/// [`channels::EDGE_SHARE`] of the `tolerance`, whose ends on a crease are
+/// the crease's crossings with the side (the lens's parameters there, the
+/// run's `ends`, are solved so by [`on_crease_crossing`]).
+fn side_across_lens(
+    shape: &ChannelShape,
+    pts: &[DVec3],
+    surface: &NurbsSurface<Vector4>,
+    ends: [glam::DVec2; 2],
+    tolerance: f64,
+) -> Result<Curve, BrepError> {
+    let f = channels::frame(shape);
+    let on_lens = channels::Other::Lens(surface, tolerance);
+    let solve = |p| channels::solve_on_side(shape, &f, &on_lens, p);
+    let mut solved = pts
+        .iter()
+        .map(|&p| solve(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let last = solved.len() - 1;
+    for (i, end) in [(0, ends[0]), (last, ends[1])] {
+        if end.x == 0.0 || end.x == 1.0 {
+            let q = surface.subs(end.x, end.y);
+            solved[i] = DVec3::new(q.x, q.y, q.z);
+        }
+    }
+    channels::refined_cubic(solved, solve, channels::EDGE_SHARE * tolerance)
 }
 
 /// Where a vertical cylinder `shape` crosses wall `w`'s skirt along the

@@ -386,7 +386,7 @@ impl BodyGeometry<'_> {
         let (v0, v1) = (params[0].y, params.last().unwrap().y);
         Ok(EdgeCurve::fixed(Curve::BSplineCurve(crease_curve(
             &surface, t, v0, v1,
-        ))))
+        )?)))
     }
 
     /// The face of `piece`, bounded by `wires`, on its exact surface.

@@ -338,13 +338,25 @@ pub(crate) struct Assembled {
     pub vertices: usize,
 }
 
-/// An edge's curve, and whether its ends are where its vertices go: a
-/// crease is the boundary of a lens surface, and ends where that surface
-/// does; a curve fitted through mesh points (a trim, a channel's edge, a
-/// line) is moved onto the vertices at its ends.
+/// An edge's curve, and how far its ends say where its vertices go.
 pub(crate) struct EdgeCurve {
     pub curve: Curve,
-    pub fixed_ends: bool,
+    pub ends: Ends,
+}
+
+/// Where an edge's vertices go, in the order the ends' kinds place them.
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Debug)]
+pub(crate) enum Ends {
+    /// A lens surface's crease or end: it ends where that surface does,
+    /// places its vertices, and is never moved.
+    Fixed,
+    /// A curve through points solved exactly onto both its faces (a
+    /// channel's side across a lens): its ends place the vertices no fixed
+    /// curve placed, and it is moved onto those a fixed curve placed.
+    Solved,
+    /// A curve fitted through mesh points (a trim, a line): moved onto the
+    /// vertices at its ends.
+    Fitted,
 }
 
 impl EdgeCurve {
@@ -352,7 +364,15 @@ impl EdgeCurve {
     pub(crate) fn fixed(curve: Curve) -> EdgeCurve {
         EdgeCurve {
             curve,
-            fixed_ends: true,
+            ends: Ends::Fixed,
+        }
+    }
+
+    /// A curve whose ends lie exactly on both its faces ([`Ends::Solved`]).
+    pub(crate) fn solved(curve: Curve) -> EdgeCurve {
+        EdgeCurve {
+            curve,
+            ends: Ends::Solved,
         }
     }
 }
@@ -361,7 +381,7 @@ impl From<Curve> for EdgeCurve {
     fn from(curve: Curve) -> EdgeCurve {
         EdgeCurve {
             curve,
-            fixed_ends: false,
+            ends: Ends::Fitted,
         }
     }
 }
@@ -404,7 +424,9 @@ fn with_ends(curve: Curve, front: DVec3, back: DVec3) -> Curve {
 /// trim through the exact wall crossing ended up to 0.04 µm from the
 /// crease's NURBS, and a reader that projects both onto the lens surface
 /// found a gap there and filled it with a degenerated edge, which its
-/// mesher turned into slivers (213 on the reference).
+/// mesher turned into slivers (213 on the reference). Where no crease
+/// ends, a solved curve's end ([`Ends::Solved`]) places the vertex: a
+/// channel's vertex left at its mesh position lay 1.8 µm off the lens.
 pub(crate) fn assemble<P>(
     pieces: &[Piece<P>],
     positions: &[DVec3],
@@ -437,9 +459,9 @@ pub(crate) fn assemble<P>(
     };
     let mut edges: HashMap<(u32, u32), Edge> = HashMap::new();
     for (key, first, last, c) in made {
-        let c = match c.fixed_ends {
-            true => c.curve,
-            false => with_ends(c.curve, at(first), at(last)),
+        let c = match c.ends {
+            Ends::Fixed => c.curve,
+            Ends::Solved | Ends::Fitted => with_ends(c.curve, at(first), at(last)),
         };
         let e = Edge::try_new(&vertex(first), &vertex(last), c).map_err(|e| BrepError::Truck {
             what: "edge",
@@ -486,13 +508,15 @@ pub(crate) fn assemble<P>(
 }
 
 /// Where the vertices at creases' ends go: each crease's end (the first
-/// crease to reach a vertex places it).
+/// crease to reach a vertex places it), then each solved curve's end.
 fn vertex_places(made: &[((u32, u32), u32, u32, EdgeCurve)]) -> HashMap<u32, DVec3> {
     let mut placed = HashMap::new();
-    for (_, first, last, c) in made.iter().filter(|m| m.3.fixed_ends) {
-        if let Some((front, back)) = ends(&c.curve) {
-            placed.entry(*first).or_insert(front);
-            placed.entry(*last).or_insert(back);
+    for kind in [Ends::Fixed, Ends::Solved] {
+        for (_, first, last, c) in made.iter().filter(|m| m.3.ends == kind) {
+            if let Some((front, back)) = ends(&c.curve) {
+                placed.entry(*first).or_insert(front);
+                placed.entry(*last).or_insert(back);
+            }
         }
     }
     placed
@@ -549,7 +573,7 @@ fn edge_curve(
             t,
             first.y,
             last.y,
-        ))));
+        )?)));
     }
     let Patch::Wall(side) = other_patch else {
         return Err(BrepError::Topology(format!(
@@ -668,7 +692,7 @@ pub(crate) fn crease_curve(
     t: f64,
     v0: f64,
     v1: f64,
-) -> BSplineCurve<Point3> {
+) -> Result<BSplineCurve<Point3>, BrepError> {
     let row = if t == 0.0 {
         0
     } else {
@@ -683,6 +707,11 @@ pub(crate) fn crease_curve(
     // nearer the layout (crate::ends): a station beyond its end is its end
     let (first, last) = truck_modeling::BoundedCurve::range_tuple(&whole);
     let (lo, hi) = (v0.min(v1).max(first), v0.max(v1).min(last));
+    if lo >= hi {
+        return Err(BrepError::Topology(format!(
+            "a crease from {v0} to {v1} has no length on its surface's span {first}..{last}"
+        )));
+    }
     let mut piece_curve = if lo > first { whole.cut(lo) } else { whole };
     if hi < last {
         let _after = piece_curve.cut(hi);
@@ -690,7 +719,7 @@ pub(crate) fn crease_curve(
     if v0 > v1 {
         piece_curve.invert();
     }
-    piece_curve
+    Ok(piece_curve)
 }
 
 /// The C² cubic through `pts` (in order, at chord-length parameters from
