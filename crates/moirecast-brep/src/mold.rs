@@ -160,6 +160,11 @@ struct Frame<'a> {
     tolerance: f64,
     /// Where the revealer's and the base's surfaces end in walls.
     ends: [WallEnds; 2],
+    /// The mesh vertices on the device's walls, which no solved channel
+    /// point moves: a vent's solved end placed a corner 0.24 µm off the
+    /// wall's plane, and OpenCascade's booleans lost a quarter of that
+    /// half (random design seed 10, `wall-corner-vent-mold.toml`).
+    on_walls: std::collections::HashSet<u32>,
 }
 
 impl Frame<'_> {
@@ -243,6 +248,7 @@ pub fn region_brep(
             channels: &[],
             tolerance: design.tolerance.mm(),
             ends: [device.revealer.ends, device.base.ends],
+            on_walls: Default::default(),
         },
         (bumps, (&device.revealer, &device.base)),
     )
@@ -302,6 +308,7 @@ pub fn half_brep(
             channels: &exact.channels,
             tolerance: design.tolerance.mm(),
             ends: [device.revealer.ends, device.base.ends],
+            on_walls: Default::default(),
         },
         (&exact.bumps, (&device.revealer, &device.base)),
     )
@@ -378,6 +385,12 @@ fn build<'a>(
             }
             _ => None,
         })
+        .collect();
+    frame.on_walls = pieces
+        .iter()
+        .filter(|piece| matches!(piece.patch, RegionFace::Wall(_)))
+        .flat_map(|piece| piece.loops.iter().flatten())
+        .flat_map(|run| run.vertices.iter().copied())
         .collect();
     let frame = frame;
     let crossings = crease_crossings(
@@ -505,7 +518,8 @@ fn on_crease_crossing(
 /// [`on_crease_crossing`]. Where two vertices of one crease find the same
 /// crossing (the mesh's run zigzags across the crease where the exact side
 /// crosses it once, found with random design seed 7), neither moves: the
-/// edge between them would have no length.
+/// edge between them would have no length. A vertex on a device wall
+/// ([`Frame::on_walls`]) stays where the lens ends in the wall.
 fn crease_crossings(
     pieces: &[Piece<RegionFace>],
     mesh: &Mesh,
@@ -520,7 +534,10 @@ fn crease_crossings(
         };
         let surface = &surfaces[&lens];
         for v in piece.loops.iter().flatten().map(|run| run.vertices[0]) {
-            if device_vertex(v).is_some() || found.contains_key(&(v, lens)) {
+            if device_vertex(v).is_some()
+                || frame.on_walls.contains(&v)
+                || found.contains_key(&(v, lens))
+            {
                 continue;
             }
             let p = mesh.positions[v as usize];
@@ -970,8 +987,11 @@ fn edge_curve<'s>(
             Ok(line().into())
         } else {
             let curve = channel_edge(frame, pair, &pts, lens_ends, mids)?;
+            // a solved end places its vertex, but on a wall
+            let ends = [run.vertices[0], run.vertices[run.vertices.len() - 1]];
+            let places = ends.map(|v| !frame.on_walls.contains(&v));
             Ok(match on_lens {
-                true => EdgeCurve::solved(curve),
+                true => EdgeCurve::solved(curve, places),
                 false => curve.into(),
             })
         };

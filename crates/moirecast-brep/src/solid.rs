@@ -351,9 +351,9 @@ pub(crate) enum Ends {
     /// places its vertices, and is never moved.
     Fixed,
     /// A curve through points solved exactly onto both its faces (a
-    /// channel's side across a lens): its ends place the vertices no fixed
-    /// curve placed, and it is moved onto those a fixed curve placed.
-    Solved,
+    /// channel's side across a lens): the ends it `places` place the
+    /// vertices no fixed curve placed, and it is moved onto the others.
+    Solved { places: [bool; 2] },
     /// A curve fitted through mesh points (a trim, a line): moved onto the
     /// vertices at its ends.
     Fitted,
@@ -368,11 +368,12 @@ impl EdgeCurve {
         }
     }
 
-    /// A curve whose ends lie exactly on both its faces ([`Ends::Solved`]).
-    pub(crate) fn solved(curve: Curve) -> EdgeCurve {
+    /// A curve whose ends lie exactly on both its faces ([`Ends::Solved`]);
+    /// those it `places` place their vertices.
+    pub(crate) fn solved(curve: Curve, places: [bool; 2]) -> EdgeCurve {
         EdgeCurve {
             curve,
-            ends: Ends::Solved,
+            ends: Ends::Solved { places },
         }
     }
 }
@@ -461,7 +462,7 @@ pub(crate) fn assemble<P>(
     for (key, first, last, c) in made {
         let c = match c.ends {
             Ends::Fixed => c.curve,
-            Ends::Solved | Ends::Fitted => with_ends(c.curve, at(first), at(last)),
+            Ends::Solved { .. } | Ends::Fitted => with_ends(c.curve, at(first), at(last)),
         };
         let e = Edge::try_new(&vertex(first), &vertex(last), c).map_err(|e| BrepError::Truck {
             what: "edge",
@@ -511,10 +512,20 @@ pub(crate) fn assemble<P>(
 /// crease to reach a vertex places it), then each solved curve's end.
 fn vertex_places(made: &[((u32, u32), u32, u32, EdgeCurve)]) -> HashMap<u32, DVec3> {
     let mut placed = HashMap::new();
-    for kind in [Ends::Fixed, Ends::Solved] {
-        for (_, first, last, c) in made.iter().filter(|m| m.3.ends == kind) {
-            if let Some((front, back)) = ends(&c.curve) {
+    let fixed = |c: &EdgeCurve| matches!(c.ends, Ends::Fixed).then_some([true; 2]);
+    let solved = |c: &EdgeCurve| match c.ends {
+        Ends::Solved { places } => Some(places),
+        _ => None,
+    };
+    for places_of in [&fixed as &dyn Fn(&EdgeCurve) -> Option<[bool; 2]>, &solved] {
+        for (_, first, last, c) in made {
+            let (Some(places), Some((front, back))) = (places_of(c), ends(&c.curve)) else {
+                continue;
+            };
+            if places[0] {
                 placed.entry(*first).or_insert(front);
+            }
+            if places[1] {
                 placed.entry(*last).or_insert(back);
             }
         }
