@@ -436,14 +436,24 @@ fn a_write_gives_the_command_lines_bytes() {
             "{file} differs from the command line's"
         );
     }
-    // the mold, too
+    // the mold, too, which says what of the device run it replaces
     let events = studio.events_until_finished(|| {
         assert_eq!(
             studio.request("POST", "/api/write?what=mold", b"").status,
             202
         );
     });
-    assert!(events.contains(r#""kind":"done""#), "{events}");
+    let done = events
+        .lines()
+        .filter_map(|l| l.strip_prefix("data: "))
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .find(|e| e["kind"] == "done")
+        .unwrap_or_else(|| panic!("no done event: {events}"));
+    assert_eq!(
+        done["replaces"],
+        serde_json::json!(["device.step", "device.stl", "report.json"]),
+        "{done}"
+    );
     let cli = Command::new(env!("CARGO_BIN_EXE_moirecast"))
         .args(["mold", "--quiet", "-o"])
         .arg(&cli_out)

@@ -1086,6 +1086,8 @@ async fn write(State(studio): State<Arc<Studio>>, Query(q): Query<WriteQuery>) -
         let studio = task_studio;
         let progress = EventProgress(studio.events.clone());
         let what = if mold { "mold" } else { "device" };
+        // what the run replaces: the folder holds one run at a time
+        let replaces = moirecast_export::run_folder::earlier_run(&studio.out);
         let _ = studio
             .events
             .send(json!({"kind": "start", "what": what, "revision": rev.number}).to_string());
@@ -1107,6 +1109,9 @@ async fn write(State(studio): State<Arc<Studio>>, Query(q): Query<WriteQuery>) -
                 "kind": "done",
                 "what": what,
                 "written": written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+                "folder": studio.out.display().to_string(),
+                // the earlier run's files (the folder's whole run is replaced)
+                "replaces": replaces,
                 "bytes": bytes,
                 "warnings": warnings,
                 // what to weigh out, as `moirecast mold` prints it

@@ -649,7 +649,9 @@ function listenForEvents() {
     if (e.kind === "done") {
       $("write-stage").textContent = `done: ${(e.bytes / 1e6).toFixed(1)} MB`;
       $("write-progress").value = $("write-progress").max;
-      $("written").textContent = e.written.map((w) => "wrote " + w).join("\n") + e.warnings.map((w) => "\nwarning: " + w).join("");
+      // a folder holds one run: say which earlier files this one replaced
+      const replaced = e.replaces.length ? `replaced the earlier run in ${e.folder}: ${e.replaces.join(", ")}\n` : "";
+      $("written").textContent = replaced + e.written.map((w) => "wrote " + w).join("\n") + e.warnings.map((w) => "\nwarning: " + w).join("");
       // the mold's casting numbers: fill (mL), grams, the mix and its parts
       if (e.casting) $("casting").textContent = e.casting.replace(/^casting: /, "To cast: ");
       setButtons(false);

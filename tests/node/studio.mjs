@@ -153,6 +153,9 @@ try {
   const casting = await page.locator("#casting").textContent();
   check(existsSync(join(out, "mold-top.stl")) && /fill [0-9.]+ mL/.test(casting) && /mix [0-9.]+ g/.test(casting) && casting.includes("sylgard"),
     `the mold is written and its casting numbers show: ${JSON.stringify(casting)}`);
+  const replaced = await page.locator("#written").textContent();
+  check(/replaced the earlier run in .*: device\.step, device\.stl, report\.json/.test(replaced),
+    `the mold's write says which device files it replaced: ${JSON.stringify(replaced.split("\n")[0])}`);
 
   // an edit, then "Save spec": the spec file keeps its comments, spacing
   // and number formatting, and only the edited line changes

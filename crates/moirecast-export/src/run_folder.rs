@@ -72,6 +72,26 @@ fn manifest_files(dir: &Path) -> Option<Vec<String>> {
     )
 }
 
+/// The files of the run in `dir` that a run into it would replace (its
+/// manifest's, or an earlier version's output files; the carried spec
+/// aside), sorted; empty where `dir` holds no run. Read before a run, it
+/// says what the run replaces.
+pub fn earlier_run(dir: &Path) -> Vec<String> {
+    let mut files = manifest_files(dir).unwrap_or_else(|| {
+        if is_earlier_run(dir) {
+            files_under(dir)
+                .into_iter()
+                .filter(|f| is_output_name(f))
+                .collect()
+        } else {
+            Vec::new()
+        }
+    });
+    files.retain(|f| !carried(f));
+    files.sort();
+    files
+}
+
 /// Every file under `dir`, relative, `/`-separated.
 fn files_under(dir: &Path) -> Vec<String> {
     let mut found = Vec::new();
@@ -341,6 +361,21 @@ mod tests {
         std::fs::write(dir.join("notes.txt"), "mine").unwrap();
         assert!(commit_run(&set(&[("device.stl", "c")]), &dir).is_err());
         assert!(dir.join("notes.txt").exists());
+    }
+
+    #[test]
+    fn an_earlier_run_is_named_by_its_files() {
+        let dir = scratch("named").join("out");
+        assert!(earlier_run(&dir).is_empty());
+        commit_run(
+            &set(&[("report.json", "{}"), ("device.stl", "solid")]),
+            &dir,
+        )
+        .unwrap();
+        std::fs::write(dir.join("spec.toml"), "saved").unwrap();
+        // the carried spec is not the run's
+        assert_eq!(earlier_run(&dir), ["device.stl", "report.json"]);
+        std::fs::remove_dir_all(dir.parent().unwrap()).unwrap();
     }
 
     #[test]
