@@ -498,8 +498,8 @@ function initGl() {
   if (!gl) { $("view-status").textContent = "WebGL is not available in this browser"; return; }
   const vs = `attribute vec3 p; attribute vec3 n; uniform mat4 m; uniform vec3 offset; varying vec3 vn;
     void main() { vn = n; gl_Position = m * vec4(p + offset, 1.0); }`;
-  const fs = `precision mediump float; varying vec3 vn; uniform vec3 colour; uniform vec3 light;
-    void main() { float l = 0.25 + 0.75 * abs(dot(normalize(vn), light)); gl_FragColor = vec4(colour * l, 1.0); }`;
+  const fs = `precision mediump float; varying vec3 vn; uniform vec3 colour; uniform vec3 light; uniform float unlit;
+    void main() { float l = unlit > 0.5 ? 1.0 : 0.25 + 0.75 * abs(dot(normalize(vn), light)); gl_FragColor = vec4(colour * l, 1.0); }`;
   const shader = (type, source) => { const s = gl.createShader(type); gl.shaderSource(s, source); gl.compileShader(s); return s; };
   const program = gl.createProgram();
   gl.attachShader(program, shader(gl.VERTEX_SHADER, vs));
@@ -555,20 +555,62 @@ async function loadMeshes(parts) {
   view.centre = [0, 1, 2].map((a) => (lo[a] + hi[a]) / 2);
   view.radius = Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / 2;
   view.height = hi[2] - lo[2];
+  view.axes = axesFrom(gl, lo, hi);
   if (!studio.distance) studio.distance = 3 * view.radius;
   const triangles = loaded.reduce((s, m) => s + m.stl.count, 0);
   $("view-status").textContent = `${triangles.toLocaleString()} triangles · drag to orbit, wheel to zoom`;
   draw();
 }
 
-function showDevice() { view.showing = "device"; studio.distance = 0; loadMeshes([["/api/device.stl", [0.55, 0.75, 0.95], 0]]); }
+// Axes from the parts' lowest corner, each as long as the parts' extent
+// along it (x red, y green, z blue; drawn unlit).
+function axesFrom(gl, lo, hi) {
+  if (view.axes) gl.deleteBuffer(view.axes.pb);
+  const lines = [];
+  for (let a = 0; a < 3; a++) {
+    const end = lo.slice(); end[a] = hi[a];
+    lines.push(...lo, ...end);
+  }
+  const pb = gl.createBuffer(); gl.bindBuffer(gl.ARRAY_BUFFER, pb); gl.bufferData(gl.ARRAY_BUFFER, new Float32Array(lines), gl.STATIC_DRAW);
+  return { pb, colours: [[1, 0.42, 0.37], [0.42, 0.86, 0.42], [0.42, 0.66, 1]] };
+}
+
+// Which view the buttons show as active.
+function markShowing() {
+  $("show-device").setAttribute("aria-pressed", String(view.showing === "device"));
+  $("show-mold").setAttribute("aria-pressed", String(view.showing === "mold"));
+}
+
+// The scale bar: a round length (1, 2 or 5 × 10^k mm) near a fifth of the
+// pane's width at the distance of the parts' centre.
+function drawScaleBar() {
+  const canvas = $("view3d"), d = studio.distance || 3 * view.radius;
+  if (!view.meshes.length || !canvas.clientHeight) { $("scale-bar").hidden = true; return; }
+  const pxPerMm = (canvas.clientHeight / 2) / (d * Math.tan(Math.PI / 8));
+  const want = canvas.clientWidth / 5 / pxPerMm;
+  const power = 10 ** Math.floor(Math.log10(want));
+  const mm = [5, 2, 1].map((m) => m * power).find((m) => m <= want) || power;
+  $("scale-bar").hidden = false;
+  $("scale-line").style.width = `${(mm * pxPerMm).toFixed(1)}px`;
+  $("scale-label").textContent = `${Number(mm.toPrecision(3))} mm`;
+  view.scaleMm = mm;
+}
+
+const INITIAL_VIEW = { yaw: studio.yaw, pitch: studio.pitch };
+function resetView() {
+  studio.yaw = INITIAL_VIEW.yaw; studio.pitch = INITIAL_VIEW.pitch; studio.distance = 3 * view.radius;
+  draw();
+}
+
+function showDevice() { view.showing = "device"; markShowing(); studio.distance = 0; loadMeshes([["/api/device.stl", [0.55, 0.75, 0.95], 0]]); }
 async function showMold() {
-  view.showing = "mold"; studio.distance = 0;
+  view.showing = "mold"; markShowing(); studio.distance = 0;
   await loadMeshes([["/api/mold/top.stl", [0.95, 0.6, 0.25], 1], ["/api/mold/bottom.stl", [0.35, 0.7, 0.65], -1], ["/api/mold/device.stl", [0.55, 0.75, 0.95], 0]]);
   loadReport(); // now with the mold's checks and warnings
 }
 $("show-device").addEventListener("click", showDevice);
 $("show-mold").addEventListener("click", showMold);
+$("reset-view").addEventListener("click", resetView);
 $("explode").addEventListener("input", () => { view.explode = Number($("explode").value); draw(); });
 
 function multiply(a, b) {
@@ -615,6 +657,17 @@ function draw() {
     gl.bindBuffer(gl.ARRAY_BUFFER, m.nb); gl.enableVertexAttribArray(n); gl.vertexAttribPointer(n, 3, gl.FLOAT, false, 0, 0);
     gl.drawArrays(gl.TRIANGLES, 0, m.count);
   }
+  gl.disableVertexAttribArray(n);
+  gl.vertexAttrib3f(n, 0, 0, 1);
+  gl.uniform1f(gl.getUniformLocation(view.program, "unlit"), 1);
+  gl.uniform3fv(gl.getUniformLocation(view.program, "offset"), [0, 0, 0]);
+  gl.bindBuffer(gl.ARRAY_BUFFER, view.axes.pb); gl.enableVertexAttribArray(p); gl.vertexAttribPointer(p, 3, gl.FLOAT, false, 0, 0);
+  view.axes.colours.forEach((c, a) => {
+    gl.uniform3fv(gl.getUniformLocation(view.program, "colour"), c);
+    gl.drawArrays(gl.LINES, 2 * a, 2);
+  });
+  gl.uniform1f(gl.getUniformLocation(view.program, "unlit"), 0);
+  drawScaleBar();
 }
 
 (() => {

@@ -142,6 +142,25 @@ try {
   const yawAfter = await page.evaluate(() => window.studio.yaw);
   check(yawAfter !== yaw && !still.equals(orbited), `dragging orbits the 3D view (yaw ${yaw.toFixed(2)} → ${yawAfter.toFixed(2)})`);
 
+  // the 3D pane's axes, scale bar, active view and reset
+  const pane = await page.evaluate(() => ({
+    label: document.getElementById("scale-label").textContent,
+    bar: document.getElementById("scale-line").getBoundingClientRect().width,
+    canvas: document.getElementById("view3d").getBoundingClientRect().width,
+    axes: Boolean(window.studio.view.axes),
+    device: document.getElementById("show-device").getAttribute("aria-pressed"),
+    mold: document.getElementById("show-mold").getAttribute("aria-pressed"),
+  }));
+  check(/^[0-9.]+ mm$/.test(pane.label) && pane.bar > 0.08 * pane.canvas && pane.bar <= 0.2 * pane.canvas + 1 && pane.axes
+    && pane.device === "true" && pane.mold === "false",
+    `the 3D pane has axes, a scale bar (${pane.label}, ${pane.bar.toFixed(0)} of ${pane.canvas.toFixed(0)} px) and marks the device view active`);
+  await page.locator("#reset-view").click();
+  // (the state, not the pixels: the software GL's antialiasing differs in
+  // about 1 % of the pixels between two draws of one view)
+  const reset = await page.evaluate(() => [window.studio.yaw, window.studio.pitch, window.studio.distance / window.studio.view.radius]);
+  check(reset[0] === 0.6 && reset[1] === 0.7 && Math.abs(reset[2] - 3) < 1e-12,
+    `"Reset view" brings back the first view (yaw ${reset[0]}, pitch ${reset[1]}, distance ${reset[2]} radii)`);
+
   // "Write device files" writes device.stl
   await page.locator("#write-device").click();
   await page.waitForFunction(() => document.getElementById("written").textContent.includes("device.stl"), null, { timeout: 120000 });
