@@ -413,6 +413,16 @@ fn read(path: &Path) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+/// The first event of `kind` among the server-sent `events`.
+fn event_of(events: &str, kind: &str) -> serde_json::Value {
+    events
+        .lines()
+        .filter_map(|l| l.strip_prefix("data: "))
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .find(|e| e["kind"] == kind)
+        .unwrap_or_else(|| panic!("no {kind} event: {events}"))
+}
+
 #[test]
 fn a_write_gives_the_command_lines_bytes() {
     let studio = Studio::start("write", SMALL);
@@ -443,12 +453,7 @@ fn a_write_gives_the_command_lines_bytes() {
             202
         );
     });
-    let done = events
-        .lines()
-        .filter_map(|l| l.strip_prefix("data: "))
-        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
-        .find(|e| e["kind"] == "done")
-        .unwrap_or_else(|| panic!("no done event: {events}"));
+    let done = event_of(&events, "done");
     assert_eq!(
         done["replaces"],
         serde_json::json!(["device.step", "device.stl", "report.json"]),
@@ -481,12 +486,7 @@ fn a_refused_write_is_worded_for_the_page() {
         let r = studio.request("POST", "/api/write?what=mold", b"");
         assert_eq!(r.status, 202);
     });
-    let error = events
-        .lines()
-        .filter_map(|l| l.strip_prefix("data: "))
-        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
-        .find(|e| e["kind"] == "error")
-        .unwrap_or_else(|| panic!("no error event: {events}"));
+    let error = event_of(&events, "error");
     assert_eq!(error["refusal"], true, "{error}");
     let message = error["message"].as_str().unwrap();
     // no command-line prefix, no spec path; the key and the rule stay
