@@ -413,6 +413,61 @@ fn read(path: &Path) -> Vec<u8> {
     std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+#[test]
+fn a_dropped_png_joins_the_specs_folder_under_a_safe_name() {
+    let studio = Studio::start("add-image", SMALL);
+    let horse = read(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/molds/profiles/horse.png"
+    )));
+    // a name that would climb out of the folder stays inside profiles/
+    let r = studio.request(
+        "POST",
+        "/api/profiles?name=..%2F..%2Fmy%20horse.png",
+        &horse,
+    );
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(r.json()["image"], "profiles/my-horse.png");
+    assert_eq!(read(&studio.dir.join("profiles/my-horse.png")), horse);
+    // the same bytes again: the same file; other bytes: a new name
+    let again = studio.request("POST", "/api/profiles?name=my%20horse.png", &horse);
+    assert_eq!(again.json()["image"], "profiles/my-horse.png");
+    let coins = read(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/molds/profiles/coins.png"
+    )));
+    let other = studio.request("POST", "/api/profiles?name=my%20horse.png", &coins);
+    assert_eq!(other.json()["image"], "profiles/my-horse-2.png");
+    // the list offers it, and a spec can name it
+    let listed = studio.get("/api/profiles").json();
+    assert!(
+        listed
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|p| p == "profiles/my-horse.png"),
+        "{listed}"
+    );
+    // not a PNG, or too many pixels: refused by name, nothing written
+    let text = studio.request("POST", "/api/profiles?name=notes.png", b"not an image");
+    assert_eq!(text.status, 400);
+    assert!(String::from_utf8_lossy(&text.body).contains("not a readable PNG"));
+    let mut wide = Vec::new();
+    image::GrayImage::new(5000, 4000)
+        .write_to(
+            &mut std::io::Cursor::new(&mut wide),
+            image::ImageFormat::Png,
+        )
+        .unwrap();
+    let bomb = studio.request("POST", "/api/profiles?name=wide.png", &wide);
+    assert_eq!(bomb.status, 400, "{}", String::from_utf8_lossy(&bomb.body));
+    assert!(String::from_utf8_lossy(&bomb.body).contains("5000 × 4000"));
+    assert!(
+        !studio.dir.join("profiles/notes.png").exists()
+            && !studio.dir.join("profiles/wide.png").exists()
+    );
+}
+
 /// The first event of `kind` among the server-sent `events`.
 fn event_of(events: &str, kind: &str) -> serde_json::Value {
     events

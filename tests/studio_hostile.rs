@@ -114,6 +114,14 @@ fn writes_from_another_site_are_refused() {
         ),
         ("PUT", "/api/spec", vec![("Origin", "null")]),
         (
+            "POST",
+            "/api/profiles?name=evil.png",
+            vec![
+                ("Origin", "http://evil.example"),
+                ("Content-Type", "image/png"),
+            ],
+        ),
+        (
             "PATCH",
             "/api/spec",
             vec![
@@ -138,6 +146,10 @@ fn writes_from_another_site_are_refused() {
         );
     }
     assert!(!studio.dir.join("out").exists(), "nothing was written");
+    assert!(
+        !studio.dir.join("profiles/evil.png").exists(),
+        "no image was added"
+    );
     assert_eq!(
         std::fs::read_to_string(studio.dir.join("design.toml")).unwrap(),
         SMALL

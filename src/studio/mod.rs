@@ -18,6 +18,7 @@
 //! file, and refuses profile images outside the spec's folder.
 
 mod frames;
+mod upload;
 mod views;
 
 use crate::errors::RunError;
@@ -430,7 +431,7 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
         .route("/api/state", get(state))
         .route("/api/spec", get(get_spec).put(put_spec).patch(patch_spec))
         .route("/api/save", post(save))
-        .route("/api/profiles", get(profiles))
+        .route("/api/profiles", get(profiles).post(add_profile))
         .route("/api/frame.png", get(frame))
         .route("/api/report", get(report))
         .route("/api/device.stl", get(device_stl))
@@ -845,6 +846,35 @@ async fn save(State(studio): State<Arc<Studio>>) -> Response {
     match result {
         Ok(path) => Json(json!({"saved": path.display().to_string()})).into_response(),
         Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, format!("{e:#}")),
+    }
+}
+
+/// `?name=` of an image added to the spec's folder.
+#[derive(Deserialize)]
+struct AddImage {
+    name: String,
+}
+
+/// Adds the PNG in the body (a file dropped on the page, named `name`) to
+/// the spec's folder under `profiles/` ([`upload::add_image`]), and answers
+/// with its path as the spec names it.
+async fn add_profile(
+    State(studio): State<Arc<Studio>>,
+    Query(q): Query<AddImage>,
+    body: axum::body::Bytes,
+) -> Response {
+    let Home::File { dir, .. } = &studio.home else {
+        return error(
+            StatusCode::CONFLICT,
+            "the built-in design has no folder for images: start the studio on a spec file (moirecast studio SPEC) and drop the image there",
+        );
+    };
+    let dir = dir.clone();
+    let added = tokio::task::spawn_blocking(move || upload::add_image(&dir, &q.name, &body)).await;
+    match added {
+        Ok(Ok(image)) => Json(json!({"image": image})).into_response(),
+        Ok(Err(why)) => error(StatusCode::BAD_REQUEST, why),
+        Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
     }
 }
 

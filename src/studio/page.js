@@ -64,16 +64,33 @@ function buildForm() {
 
 function setProfileChoices(profiles) {
   const doc = studio.keys.find((d) => d.key === "profile.image");
-  const old = document.querySelector('[data-key="profile.image"] input');
+  const old = document.querySelector('[data-key="profile.image"] input, [data-key="profile.image"] select');
   if (!doc || !old) return;
   const select = document.createElement("select");
   select.id = old.id; select.name = old.name;
   // every name from the server is text, never markup
   select.add(new Option("(none)", ""));
   for (const p of profiles) select.add(new Option(p, p));
+  select.value = old.value;
   select.addEventListener("change", () => edit(doc, select.value));
   old.replaceWith(select);
 }
+
+// A PNG dropped anywhere on the page goes into the spec's folder
+// (profiles/, named safely by the server) and becomes the profile.
+document.addEventListener("dragover", (e) => { if (e.dataTransfer && [...e.dataTransfer.types].includes("Files")) e.preventDefault(); });
+document.addEventListener("drop", async (e) => {
+  const file = e.dataTransfer && e.dataTransfer.files[0];
+  if (!file) return;
+  e.preventDefault();
+  if (file.type && file.type !== "image/png") { setStatus(`${file.name}: drop a PNG image`); return; }
+  const response = await api(`/api/profiles?name=${encodeURIComponent(file.name)}`, { method: "POST", body: await file.arrayBuffer(), headers: { "content-type": "image/png" } });
+  const body = await response.json().catch(() => ({}));
+  if (!response.ok) { setStatus(`${file.name}: ${body.error || `HTTP ${response.status}`}`); return; }
+  setProfileChoices(await (await api("/api/profiles")).json());
+  await patchSpec([{ key: "profile.kind", value: "image" }, { key: "profile.image", value: body.image }]);
+  setStatus(`added ${body.image} and made it the profile`);
+});
 
 // Which keys apply to the design as written: the others (printed keys on a
 // dual-lens design, z on a saddle, …) hide unless "all keys" is ticked,

@@ -16,7 +16,7 @@
 // formula; only the keys that apply show); undo and redo step through the
 // revisions, with an unsaved mark; the explore grid marks the
 // current design's cell, and goes stale when the design changes; at 390 px the
-// page scrolls only down. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
+// page scrolls only down; a dropped PNG becomes the profile. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
 
 import { existsSync, readFileSync } from "node:fs";
 import { join } from "node:path";
@@ -238,6 +238,21 @@ try {
     `kind = formula, refused alone, builds with z typed after it: ${JSON.stringify(linked)}`);
   const stale = await page.evaluate(() => [document.getElementById("grid").classList.contains("stale"), document.getElementById("explore-status").textContent]);
   check(stale[0] && stale[1].startsWith("stale"), `the grid scored for the saddle is marked stale: ${JSON.stringify(stale[1])}`);
+
+  // a PNG dropped on the page joins the spec's folder and becomes the profile
+  const png = readFileSync(new URL("../../molds/profiles/coins.png", import.meta.url)).toString("base64");
+  const beforeDrop = await page.evaluate(() => window.studio.revision);
+  await page.evaluate((b64) => {
+    const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+    const transfer = new DataTransfer();
+    transfer.items.add(new File([bytes], "my coins.png", { type: "image/png" }));
+    document.body.dispatchEvent(new DragEvent("drop", { dataTransfer: transfer, bubbles: true, cancelable: true }));
+  }, png);
+  await page.waitForFunction(([r]) => window.studio.revision > r, [beforeDrop], { timeout: 60000 });
+  const dropped = await page.evaluate(() => ({ profile: window.studio.values.profile, chosen: document.getElementById("f-profile-image").value }));
+  check(dropped.profile.kind === "image" && dropped.profile.image === "profiles/my-coins.png" && dropped.chosen === "profiles/my-coins.png"
+    && existsSync(join(work, "profiles", "my-coins.png")),
+    `a dropped PNG is added to the spec's folder and made the profile: ${JSON.stringify(dropped)}`);
 
   await page.screenshot({ path: screenshot, fullPage: true });
   console.log(`screenshot: ${screenshot}`);
