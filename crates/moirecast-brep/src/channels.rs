@@ -81,9 +81,9 @@ pub(crate) fn off_side(c: &ChannelShape, f: &ChannelFrame, p: DVec3) -> f64 {
     f.distance(p) - radius_at(c, f.along(p))
 }
 
-/// Where the crease at across parameter `t` of `lens` crosses the side of
-/// one of `shapes`, near along parameter `v` (a mesh vertex's, within
-/// `within` mm of the side): the along parameter solved by secant steps to
+/// Where the crease at across parameter `near.x` of `lens` crosses the
+/// side of one of `shapes`, near along parameter `near.y` (a mesh
+/// vertex's, within `within` mm of the side): the along parameter solved by secant steps to
 /// [`SOLVED_MM`]. `None` where no side passes that near, or the steps do
 /// not settle. A channel's vertex on a crease goes there, so that its edges
 /// along the crease and along the side meet on both surfaces (found: a vent
@@ -92,9 +92,10 @@ pub(crate) fn off_side(c: &ChannelShape, f: &ChannelFrame, p: DVec3) -> f64 {
 pub(crate) fn crease_crossing(
     shapes: &[ChannelShape],
     lens: &NurbsSurface<Vector4>,
-    (t, v): (f64, f64),
+    near: glam::DVec2,
     within: f64,
 ) -> Option<f64> {
+    let (t, v) = (near.x, near.y);
     let at = |v: f64| {
         let q = lens.subs(t, v);
         DVec3::new(q.x, q.y, q.z)

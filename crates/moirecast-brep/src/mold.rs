@@ -481,7 +481,7 @@ fn build<'a>(
     })
 }
 
-/// Where the lens's parameters `(u, w)` of a channel's vertex `p` (which
+/// Where the lens's parameters `uw` of a channel's vertex `p` (which
 /// no device vertex placed) lie on a crease: the crease's exact crossing
 /// with the channel's side ([`channels::crease_crossing`]). The mesh's
 /// chord puts such a vertex beside the crease (across parameters to 0.01
@@ -491,11 +491,12 @@ fn build<'a>(
 fn on_crease_crossing(
     surface: &NurbsSurface<Vector4>,
     p: DVec3,
-    (u, w): (f64, f64),
+    uw: glam::DVec2,
     frame: &Frame,
 ) -> Option<glam::DVec2> {
     /// How far across a vertex may lie from a crease and still be on it.
     const ACROSS: f64 = 0.05;
+    let (u, w) = (uw.x, uw.y);
     let t = [0.0, 1.0].into_iter().find(|t| (u - t).abs() < ACROSS)?;
     let near = 2.0 * frame.tolerance;
     let at = |w: f64| {
@@ -505,7 +506,7 @@ fn on_crease_crossing(
     if at(w).distance(p) > near {
         return None;
     }
-    let crossing = channels::crease_crossing(frame.channels, surface, (t, w), near);
+    let crossing = channels::crease_crossing(frame.channels, surface, glam::DVec2::new(t, w), near);
     // inside the surface's own span (a lens ended in a wall ends there)
     let (_, (first, last)) = truck_modeling::BoundedSurface::range_tuple(surface);
     crossing
@@ -541,8 +542,8 @@ fn crease_crossings(
                 continue;
             }
             let p = mesh.positions[v as usize];
-            let uw = crate::solid::lens_params(surface, p, frame.tolerance);
-            if let Some(uv) = on_crease_crossing(surface, p, uw, frame) {
+            let (u, w) = crate::solid::lens_params(surface, p, frame.tolerance);
+            if let Some(uv) = on_crease_crossing(surface, p, glam::DVec2::new(u, w), frame) {
                 found.insert((v, lens), uv);
             }
         }
