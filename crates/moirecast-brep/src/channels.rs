@@ -108,21 +108,7 @@ pub(crate) fn crease_crossing(
     if g(v).abs() > within {
         return None;
     }
-    let (mut a, mut b) = (v, v + 1e-4);
-    let (mut ga, mut gb) = (g(a), g(b));
-    for _ in 0..SOLVE_STEPS {
-        if gb.abs() < SOLVED_MM {
-            return Some(b);
-        }
-        if gb == ga {
-            break;
-        }
-        let next = b - gb * (b - a) / (gb - ga);
-        (a, ga) = (b, gb);
-        b = next;
-        gb = g(b);
-    }
-    (gb.abs() < SOLVED_MM).then_some(b)
+    secant_root(v, g)
 }
 
 /// The point of `c`'s exact side at `angle` and position `h`.
@@ -290,6 +276,27 @@ pub(crate) enum Other<'a> {
     Lens(&'a NurbsSurface<Vector4>, f64),
 }
 
+/// Where `g` is zero near `x0`: secant steps from `x0` and `x0 + 1e-4`,
+/// at most [`SOLVE_STEPS`], until |g| < [`SOLVED_MM`]; `None` if they do
+/// not get there.
+fn secant_root(x0: f64, g: impl Fn(f64) -> f64) -> Option<f64> {
+    let (mut a, mut b) = (x0, x0 + 1e-4);
+    let (mut ga, mut gb) = (g(a), g(b));
+    for _ in 0..SOLVE_STEPS {
+        if gb.abs() < SOLVED_MM {
+            return Some(b);
+        }
+        if gb == ga {
+            break;
+        }
+        let next = b - gb * (b - a) / (gb - ga);
+        (a, ga) = (b, gb);
+        b = next;
+        gb = g(b);
+    }
+    (gb.abs() < SOLVED_MM).then_some(b)
+}
+
 /// How many Newton or secant steps a solve takes at most.
 const SOLVE_STEPS: usize = 40;
 /// When a solved point counts as on both surfaces (mm).
@@ -313,25 +320,7 @@ pub(crate) fn solve_on_side(
     match other {
         Other::Implicit(g) => {
             // secant steps from the mesh point's position
-            let (mut a, mut b) = (h0, h0 + 1e-4);
-            let (mut ga, mut gb) = (g(at(a)), g(at(b)));
-            for _ in 0..SOLVE_STEPS {
-                if gb.abs() < SOLVED_MM {
-                    return Ok(at(b));
-                }
-                if gb == ga {
-                    break;
-                }
-                let next = b - gb * (b - a) / (gb - ga);
-                (a, ga) = (b, gb);
-                b = next;
-                gb = g(at(b));
-            }
-            if gb.abs() < SOLVED_MM {
-                Ok(at(b))
-            } else {
-                Err(fail())
-            }
+            secant_root(h0, |h| g(at(h))).map(at).ok_or_else(fail)
         }
         Other::Lens(s, within) => {
             let (mut u, mut v) = crate::solid::lens_params(s, p, *within);
