@@ -127,18 +127,20 @@ impl CubicGrid {
         e
     }
 
-    /// The 4 × 4 Catmull-Rom stencil around (x, y).
+    /// The 4 × 4 Catmull-Rom stencil around (x, y). Inlined: it runs
+    /// once per evaluation, millions of times a run (the base creases'
+    /// Newton solves), and as a call it cost a third of the evaluation.
+    #[inline(always)]
     fn stencil(&self, x: f64, y: f64) -> Stencil {
         let fx = ((x - self.origin.x) / self.spacing).clamp(0.0, (self.nx - 1) as f64);
         let fy = ((y - self.origin.y) / self.spacing).clamp(0.0, (self.ny - 1) as f64);
         // fx, fy ≥ 0, so truncation is floor (and avoids a libm call)
         let (i, j) = (
-            (fx as usize).min(self.nx - 2) as f64,
-            (fy as usize).min(self.ny - 2) as f64,
+            (fx as usize).min(self.nx - 2),
+            (fy as usize).min(self.ny - 2),
         );
-        let (wx, dx) = catmull_rom(fx - i);
-        let (wy, dy) = catmull_rom(fy - j);
-        let (i, j) = (i as usize, j as usize);
+        let (wx, dx) = catmull_rom(fx - i as f64);
+        let (wy, dy) = catmull_rom(fy - j as f64);
         Stencil {
             i,
             j,
@@ -152,6 +154,7 @@ impl CubicGrid {
 
     /// Row `b` of the stencil's values: in the interior a slice of the
     /// grid, at the border clamped to it.
+    #[inline(always)]
     fn stencil_row(&self, s: &Stencil, b: usize) -> [f64; 4] {
         if s.interior {
             let start = (s.j - 1 + b) * self.nx + s.i - 1;
