@@ -2,8 +2,10 @@
 //! design (or SPEC): the latency of a 256 px frame (median and p95 over
 //! RUNS requests at tilts across ±10°, after one frame has built the
 //! sections) with the default 16 lens phases and with the 9 the page asks
-//! for while a slider moves, of a 512 px frame, and the time from a spec
-//! edit (`PUT /api/spec`) to its first 256 px frame.
+//! for while a slider moves, of a 512 px frame, of a 256 px frame tilted
+//! along the lenses too (5°, 10° and 20°, at the same tilts across) beside
+//! the one tilted about their axis alone, and the time from a spec edit
+//! (`PUT /api/spec`) to its first 256 px frame.
 //!
 //! `cargo bench --bench studio [-- SPEC [RUNS]]`
 
@@ -38,27 +40,48 @@ fn main() {
         );
         (t.elapsed().as_secs_f64() * 1e3, r)
     };
+    // RUNS frames at tilts across ±10°, each `query(tilt)`: their latencies
+    // over HTTP and their render times (ms)
+    let frames = |query: &dyn Fn(f64) -> String| {
+        let (mut latency, mut render) = (Vec::new(), Vec::new());
+        for i in 0..runs {
+            let tilt = -10.0 + 20.0 * i as f64 / runs as f64;
+            let (ms, r) = get(&query(tilt));
+            latency.push(ms);
+            render.push(r.header("x-render-ms").unwrap().parse::<f64>().unwrap());
+        }
+        (latency, render)
+    };
     // the default (16 lens phases), and what the page asks for while a
     // slider moves (9)
+    let mut about_axis_ms = f64::NAN;
     for (size, samples) in [(256, 4), (256, 3), (512, 4)] {
         // builds the sections, at a tilt the runs do not ask for (a view
         // asked for again is served from the revision's cache)
         get(&format!("/api/frame.png?size={size}&tilt=0.123"));
-        let (mut latency, mut render) = (Vec::new(), Vec::new());
-        for i in 0..runs {
-            let tilt = -10.0 + 20.0 * i as f64 / runs as f64;
-            let (ms, r) = get(&format!(
-                "/api/frame.png?size={size}&samples={samples}&tilt={tilt}"
-            ));
-            latency.push(ms);
-            render.push(r.header("x-render-ms").unwrap().parse::<f64>().unwrap());
-        }
+        let (latency, render) =
+            frames(&|tilt| format!("/api/frame.png?size={size}&samples={samples}&tilt={tilt}"));
         println!(
             "frame {size} px, {:2} phases  median {:6.1} ms, p95 {:6.1} ms over HTTP (render alone: median {:.1} ms)",
             samples * samples,
             median(latency.clone()),
             quantile(latency, 0.95),
-            median(render)
+            median(render.clone())
+        );
+        if (size, samples) == (256, 4) {
+            about_axis_ms = median(render);
+        }
+    }
+    // tilted along the lenses as well, at the same tilts across: each ray
+    // follows its drift along the lenses through the sections
+    for along in [5.0, 10.0, 20.0] {
+        let (latency, render) =
+            frames(&|tilt| format!("/api/frame.png?size=256&samples=4&tilt={tilt}&along={along}"));
+        let alone = median(render);
+        println!(
+            "frame 256 px, 16 phases, {along:2}° along  median {:6.1} ms over HTTP (render alone: median {alone:.1} ms, {:.2}x the frame tilted about the axis alone)",
+            median(latency),
+            alone / about_axis_ms
         );
     }
     // the same views again: each served from the cache

@@ -152,8 +152,8 @@ struct ViewArgs {
     #[arg(long, value_enum, default_value = "branching")]
     integrator: IntegratorArg,
     /// `sections`: the branching integrator traces a dual-lens device's
-    /// exact cross-sections where the view allows (orthographic, no
-    /// --tilt-along), a preview many times faster than the mesh. `mesh`:
+    /// exact cross-sections where the view allows (orthographic), a
+    /// preview many times faster than the mesh. `mesh`:
     /// the device's triangles, as printed, everywhere.
     #[arg(long, value_enum, default_value = "sections")]
     tracer: TracerArg,

@@ -46,7 +46,7 @@ pub struct RenderOptions {
 pub enum Tracer {
     /// The exact cross-sections of a dual-lens device
     /// ([`moirecast_render::section`]), where the view allows (orthographic,
-    /// tilted about the lens axis only); the mesh elsewhere.
+    /// tilted about either axis); the mesh elsewhere.
     #[default]
     Sections,
     /// The mesh, as printed, everywhere.
@@ -57,7 +57,7 @@ impl Tracer {
     /// What it is, for reports.
     pub fn describe(&self) -> &'static str {
         match self {
-            Tracer::Sections => "sections: a dual-lens device's exact cross-sections where the view allows (orthographic, tilted about the lens axis only), the mesh elsewhere",
+            Tracer::Sections => "sections: a dual-lens device's exact cross-sections where the view allows (orthographic, tilted about either axis), the mesh elsewhere",
             Tracer::Mesh => "mesh: the device's triangles, as printed",
         }
     }
@@ -164,12 +164,11 @@ impl RenderOptions {
 
     /// Whether the sections trace every pixel the device covers in these
     /// frames: the branching integrator through a dual-lens device's
-    /// sections, an orthographic camera, no tilt along.
+    /// sections, an orthographic camera.
     pub fn sections_trace_every_frame(&self, design: &Design) -> bool {
         self.tracer == Tracer::Sections
             && matches!(self.integrator, Integrator::Branching(_))
             && self.camera_distance(design).is_none()
-            && self.tilt_along(design) == 0.0
     }
 
     /// The eye's distance of a perspective camera (mm): `--camera-distance`,

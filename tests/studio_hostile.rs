@@ -330,7 +330,8 @@ fn frames_have_a_budget_and_hung_up_frames_leave_the_worker() {
     );
     assert_eq!(r.status, 400, "{}", String::from_utf8_lossy(&r.body));
     assert!(String::from_utf8_lossy(&r.body).contains("budget"));
-    // within the budget but slow: through the mesh, 1024 px at 4 phases
+    // within the budget, and among the slowest frames: 1024 px at 4
+    // phases, tilted about both axes
     let slow = "/api/frame.png?size=1024&samples=2&along=20&tilt=10";
     for _ in 0..3 {
         let mut hung = std::net::TcpStream::connect(("127.0.0.1", studio.port)).unwrap();

@@ -2,9 +2,10 @@
 //! drops a request that a newer one overtook while it waited.
 //!
 //! The worker owns what frames are traced through, built on first need and
-//! kept: a dual-lens device's exact sections per frame size (a frame tilted
-//! about the lens axis only needs nothing else), and the device's mesh and
-//! its BVH for the other frames (a tilt along, a printed device).
+//! kept: a dual-lens device's exact sections per frame size (an
+//! orthographic frame, tilted about either axis, needs nothing else), and
+//! the device's mesh and its BVH for the other frames (a printed device, a
+//! perspective view).
 
 use crate::render::{png, LightsChoice, Tracer};
 use moirecast_kernel::mesher::DeviceMesh;
@@ -33,8 +34,8 @@ pub const SAMPLES: (usize, usize) = (1, 8);
 /// Most rays a frame may trace through the exact sections: a 1024 px
 /// frame at 16 lens phases (the page's frames: 256 px at 9 or 16).
 pub const SECTION_RAYS: usize = 1024 * 1024 * 16;
-/// Most rays a frame may trace through the mesh (a tilt along, a printed
-/// device), each several times a section ray's cost: four times the
+/// Most rays a frame may trace through the mesh (a printed device, a
+/// perspective view), each several times a section ray's cost: four times the
 /// page's 256 px at 16 phases. 1024 px at 64 phases, through the mesh at
 /// a 30° tilt along, held the only frame worker for over 13 minutes.
 pub const MESH_RAYS: usize = 4 * 256 * 256 * 16;
@@ -81,7 +82,7 @@ impl FrameRequest {
     /// a dual-lens device's sections, [`MESH_RAYS`] through the mesh.
     pub fn within_budget(&self, design: &moirecast_kernel::Design) -> Result<(), String> {
         let rays = self.size * self.size * self.samples * self.samples;
-        let (budget, through) = if by_sections(design, self.along_deg) {
+        let (budget, through) = if by_sections(design) {
             (SECTION_RAYS, "the exact sections")
         } else {
             (MESH_RAYS, "the mesh")
@@ -96,14 +97,12 @@ impl FrameRequest {
     }
 }
 
-/// Whether a frame `along_deg` about x from the design view is traced
-/// through a dual-lens device's exact sections (an orthographic view
-/// tilted about the lens axis only), not through its mesh.
-pub fn by_sections(design: &moirecast_kernel::Design, along_deg: f64) -> bool {
-    let view = &design.params.view;
-    design.params.base.kind == BaseKind::DualLens
-        && view.tilt_along + along_deg.to_radians() == 0.0
-        && view.distance.is_none()
+/// Whether a frame is traced through a dual-lens device's exact sections
+/// (an orthographic view, tilted about either axis; a tilt along follows
+/// each ray's drift along the lenses, `moirecast_render::section::Drift`),
+/// not through its mesh.
+pub fn by_sections(design: &moirecast_kernel::Design) -> bool {
+    design.params.base.kind == BaseKind::DualLens && design.params.view.distance.is_none()
 }
 
 /// A rendered frame and its scores.
@@ -330,7 +329,7 @@ fn work(
         };
         let view = view_of(design, r, lighting);
         let keep_going = || !job.reply.is_closed() && latest.load(Ordering::SeqCst) == job.number;
-        let through = by_sections(design, r.along_deg)
+        let through = by_sections(design)
             .then(|| {
                 sections
                     .entry(r.size)
