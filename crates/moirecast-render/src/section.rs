@@ -604,7 +604,7 @@ impl Section {
                 // creases' direction is the lens's axis all the same)
                 Arc2 {
                     axis: per_unit_y(
-                        crease_direction(design, w[0]) + crease_direction(design, w[1]),
+                        crease_direction(design, u0, v0) + crease_direction(design, u1, v1),
                     ),
                     ..Arc2::new(&LensArc::new(p0, p1, toward, rule), DVec3::Y)
                 }
@@ -635,7 +635,7 @@ impl Section {
 /// The unit direction of the base crease through layout point (u, v):
 /// along it the base phase is constant, u − E(u, v) + C(u, v) fixed, so
 /// du/dv = ∂shift/∂v / (1 − ∂shift/∂u).
-fn crease_direction(design: &Design, (u, v): (f64, f64)) -> DVec3 {
+fn crease_direction(design: &Design, u: f64, v: f64) -> DVec3 {
     let (_, grad) = design.shift_and_gradient(u, v);
     let du_dv = grad.y / (1.0 - grad.x);
     let h = CREASE_STEP_MM;
@@ -731,6 +731,20 @@ impl Section {
             axis: arc.axis,
             arc: Some(at),
         })
+    }
+
+    /// Where a ray meets arc `at` alone, if it does, else the whole
+    /// section ([`Section::meet_hit`]).
+    fn meet_lens_first(
+        &self,
+        at: Option<ArcAt>,
+        side: Side,
+        origin: DVec3,
+        dir: DVec3,
+        t_min: f64,
+    ) -> Option<Hit2> {
+        at.and_then(|at| self.meet_arc(at, side, origin, dir, t_min))
+            .or_else(|| self.meet_hit(side, origin, dir, t_min))
     }
 
     /// [`Surfaces::meet`], with the axis of the surface met.
@@ -916,10 +930,7 @@ impl Surfaces for Drift<'_, '_> {
                 section = self.sections.section(row)?;
                 let (o, d) = (self.slid(row, axis, origin), dir - dir.y * axis);
                 let same = h.arc.and_then(|at| section.same_arc(at, met_in));
-                hit = match same.and_then(|at| section.meet_arc(at, side, o, d, t_min)) {
-                    Some(again) => Some(again),
-                    None => section.meet_hit(side, o, d, t_min),
-                };
+                hit = section.meet_lens_first(same, side, o, d, t_min);
                 continue;
             }
             // a row a step away still holds the lens swept along its axis
@@ -933,10 +944,7 @@ impl Surfaces for Drift<'_, '_> {
             // ray now passes it by
             axis = h.axis;
             let (o, d) = (self.slid(row, axis, origin), dir - dir.y * axis);
-            hit = match h.arc.and_then(|at| section.meet_arc(at, side, o, d, t_min)) {
-                Some(again) => Some(again),
-                None => section.meet_hit(side, o, d, t_min),
-            };
+            hit = section.meet_lens_first(h.arc, side, o, d, t_min);
         }
         hit.map(oblique)
     }
