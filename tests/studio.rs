@@ -554,3 +554,81 @@ fn a_refused_write_is_worded_for_the_page() {
     );
     assert!(message.contains("base.kind"), "{message}");
 }
+
+#[test]
+fn save_as_and_open_stay_in_the_specs_folder() {
+    let studio = Studio::start("files", SMALL);
+    let dir = &studio.dir;
+    // Save as: a new name becomes the spec file
+    let r = studio.request("POST", "/api/save-as?name=copy", b"");
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(read(&dir.join("copy.toml")), SMALL.as_bytes());
+    let spec_file = |studio: &Studio| studio.get("/api/state").json()["spec_file"].clone();
+    assert!(spec_file(&studio).as_str().unwrap().ends_with("copy.toml"));
+    // another existing file is replaced only when asked
+    let r = studio.request("POST", "/api/save-as?name=design.toml", b"");
+    assert_eq!(r.status, 409);
+    assert_eq!(r.json()["exists"], true);
+    let r = studio.request("POST", "/api/save-as?name=design.toml&replace=true", b"");
+    assert_eq!(r.status, 200);
+    // names that leave the folder, hide, or are no spec are refused
+    for bad in [
+        "../up.toml",
+        "sub%2Fx.toml",
+        ".hidden.toml",
+        "x.txt",
+        "",
+        "a%00b.toml",
+    ] {
+        let r = studio.request("POST", &format!("/api/save-as?name={bad}"), b"");
+        assert_eq!(r.status, 400, "save as {bad:?}");
+        let r = studio.request("POST", &format!("/api/open?name={bad}"), b"");
+        assert_eq!(r.status, 400, "open {bad:?}");
+    }
+    assert!(!dir.parent().unwrap().join("up.toml").exists());
+    assert_eq!(
+        studio.get("/api/specs").json()["specs"],
+        serde_json::json!(["copy.toml", "design.toml"])
+    );
+
+    // Open: a spec that does not build is refused by key, nothing changes
+    let bad = SMALL.replace("afov = 60.0", "afov = 200");
+    std::fs::write(dir.join("bad.toml"), &bad).unwrap();
+    let before = studio.get("/api/state").json();
+    let r = studio.request("POST", "/api/open?name=bad.toml", b"");
+    assert_eq!(r.status, 422);
+    assert_eq!(r.json()["errors"][0]["key"], "lens.afov");
+    assert_eq!(studio.get("/api/state").json(), before);
+    assert_eq!(
+        studio
+            .request("POST", "/api/open?name=missing.toml", b"")
+            .status,
+        404
+    );
+
+    // a valid one becomes the design and the file that Save writes
+    let other = SMALL.replace("afov = 60.0", "afov = 50.0   # mine");
+    std::fs::write(dir.join("other.toml"), &other).unwrap();
+    let r = studio.request("POST", "/api/open?name=other.toml", b"");
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    let state = r.json();
+    assert_eq!(state["spec"], other.as_str());
+    assert_eq!(state["values"]["lens"]["afov"], 50.0);
+    assert!(state["revision"].as_u64() > before["revision"].as_u64());
+    assert!(state["spec_file"].as_str().unwrap().ends_with("other.toml"));
+    let r = http::request_with(
+        studio.port,
+        &format!("127.0.0.1:{}", studio.port),
+        "PATCH",
+        "/api/spec",
+        &[("Content-Type", "application/json")],
+        br#"{"edits": [{"key": "lens.afov", "value": 45}]}"#,
+    );
+    assert_eq!(r.status, 200);
+    assert_eq!(studio.request("POST", "/api/save", b"").status, 200);
+    assert_eq!(
+        std::fs::read_to_string(dir.join("other.toml")).unwrap(),
+        other.replace("afov = 50.0", "afov = 45.0")
+    );
+    assert_eq!(read(&dir.join("design.toml")), SMALL.as_bytes());
+}

@@ -17,6 +17,7 @@
 //! its embedded page, writes only into `-o DIR` and saves only the spec
 //! file, and refuses profile images outside the spec's folder.
 
+mod files;
 mod frames;
 mod upload;
 mod views;
@@ -72,11 +73,29 @@ pub struct StudioOptions {
 }
 
 /// Where the spec's text and its images live.
+#[derive(Clone)]
 enum Home {
     /// A spec file: it is saved in place, images resolve beside it.
     File { path: PathBuf, dir: PathBuf },
     /// The embedded reference design: saved into `-o DIR`.
     Embedded,
+}
+
+impl Home {
+    /// The spec's name in messages, as the command line names it.
+    fn file_name(&self) -> String {
+        match self {
+            Home::File { path, .. } => path.display().to_string(),
+            Home::Embedded => "<default: molds/saddle-horse.toml>".into(),
+        }
+    }
+
+    fn images(&self) -> ImageSource<'_> {
+        match self {
+            Home::File { dir, .. } => ImageSource::Dir(dir),
+            Home::Embedded => ImageSource::Embedded,
+        }
+    }
 }
 
 /// Something built from a revision once: it, or the error as the command
@@ -185,7 +204,8 @@ async fn blocking<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> 
 
 /// The server's state.
 pub struct Studio {
-    home: Home,
+    /// Changed by Open and Save as.
+    home: RwLock<Home>,
     out: PathBuf,
     /// `Host` header values the server answers to; `None`: any (it
     /// listens on every address, and every request needs the token).
@@ -209,29 +229,23 @@ impl Studio {
         self.current.read().expect("not poisoned").clone()
     }
 
-    /// The spec's name in messages, as the command line names it.
-    fn file_name(&self) -> String {
-        match &self.home {
-            Home::File { path, .. } => path.display().to_string(),
-            Home::Embedded => "<default: molds/saddle-horse.toml>".into(),
-        }
-    }
-
-    fn images(&self) -> ImageSource<'_> {
-        match &self.home {
-            Home::File { dir, .. } => ImageSource::Dir(dir),
-            Home::Embedded => ImageSource::Embedded,
-        }
+    fn home(&self) -> Home {
+        self.home.read().expect("not poisoned").clone()
     }
 
     /// Parses and validates `text` as the command line would, and refuses
     /// profile images outside the spec's folder.
     fn parse(&self, text: &str) -> Result<Spec, Vec<serde_json::Value>> {
+        self.parse_at(&self.home(), text)
+    }
+
+    /// [`parse`](Self::parse) for a spec that lives at `home`.
+    fn parse_at(&self, home: &Home, text: &str) -> Result<Spec, Vec<serde_json::Value>> {
         if let Some(image) = toml::from_str::<toml::Table>(text)
             .ok()
             .and_then(|t| t.get("profile")?.get("image")?.as_str().map(str::to_owned))
         {
-            let inside = match &self.home {
+            let inside = match home {
                 Home::File { dir, .. } => is_inside(dir, Path::new(&image)),
                 Home::Embedded => is_plain_relative(Path::new(&image)),
             };
@@ -241,11 +255,11 @@ impl Studio {
                     "value": format!("{image:?}"),
                     "message": "is not an image file inside the spec's folder (the studio reads no other)",
                     "fix": "pick an image from the list, or give a path relative to the spec's folder without `..`",
-                    "cli": format!("error: spec `{}`: `profile.image` = {image:?}: is not an image file inside the spec's folder (the studio reads no other).\n  Fix: pick an image from the list, or give a path relative to the spec's folder without `..`", self.file_name()),
+                    "cli": format!("error: spec `{}`: `profile.image` = {image:?}: is not an image file inside the spec's folder (the studio reads no other).\n  Fix: pick an image from the list, or give a path relative to the spec's folder without `..`", home.file_name()),
                 })]);
             }
         }
-        let mut spec = moirecast_spec::parse(text, &self.file_name(), self.images())
+        let mut spec = moirecast_spec::parse(text, &home.file_name(), home.images())
             .map_err(|e| vec![spec_error_json(&e)])?;
         if self.allow_large {
             spec.design.mesh_budget = moirecast_kernel::MeshBudget::UNLIMITED;
@@ -265,10 +279,11 @@ impl Studio {
             "values": values,
             "design": design_echo(&rev.spec),
             "derived": derived(&rev.spec),
-            "spec_file": match &self.home {
+            "spec_file": match self.home() {
                 Home::File { path, .. } => path.display().to_string(),
                 Home::Embedded => self.out.join("spec.toml").display().to_string(),
             },
+            "folder": files::folder(&self.home(), &self.out).display().to_string(),
             "out": self.out.display().to_string(),
         })
     }
@@ -392,7 +407,7 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
     let port = addr.port();
     let (hosts, token) = allowed_hosts(addr);
     let studio = Studio {
-        home,
+        home: RwLock::new(home),
         out: options.out.clone(),
         hosts,
         token: token.clone(),
@@ -430,8 +445,11 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
         .route("/api/keys", get(keys))
         .route("/api/state", get(state))
         .route("/api/spec", get(get_spec).put(put_spec).patch(patch_spec))
-        .route("/api/save", post(save))
-        .route("/api/profiles", get(profiles).post(add_profile))
+        .route("/api/save", post(files::save))
+        .route("/api/save-as", post(files::save_as))
+        .route("/api/specs", get(files::specs))
+        .route("/api/open", post(files::open))
+        .route("/api/profiles", get(files::profiles).post(add_profile))
         .route("/api/frame.png", get(frame))
         .route("/api/report", get(report))
         .route("/api/device.stl", get(device_stl))
@@ -794,59 +812,31 @@ async fn install(studio: Arc<Studio>, text: String) -> Response {
         blocking(move || studio.parse(&text)).await
     };
     match parsed {
-        Err(errors) => (
-            StatusCode::UNPROCESSABLE_ENTITY,
-            Json(json!({"errors": errors, "revision": studio.current().number})),
-        )
-            .into_response(),
-        Ok(spec) => {
-            let number = studio.revisions.fetch_add(1, Ordering::Relaxed) + 1;
-            let rev = Arc::new(Revision::new(number, text, spec));
-            let old = std::mem::replace(
-                &mut *studio.current.write().expect("not poisoned"),
-                rev.clone(),
-            );
-            old.replaced.store(true, Ordering::SeqCst);
-            Json(studio.state(&rev)).into_response()
-        }
+        Err(errors) => refused(&studio, errors),
+        Ok(spec) => make_current(&studio, text, spec),
     }
 }
 
-/// Writes the current spec's text to the spec file (or `DIR/spec.toml`
-/// with the embedded images it names, for the reference design).
-async fn save(State(studio): State<Arc<Studio>>) -> Response {
-    let rev = studio.current();
-    let result = blocking(move || -> anyhow::Result<PathBuf> {
-        let mut files = moirecast_export::OutputSet::new();
-        let (dir, name) = match &studio.home {
-            Home::File { path, dir } => (
-                dir.clone(),
-                path.file_name()
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .unwrap_or_else(|| "spec.toml".into()),
-            ),
-            Home::Embedded => (studio.out.clone(), "spec.toml".to_string()),
-        };
-        files.add(&name, rev.text.clone().into_bytes());
-        let mut written = files.commit(&dir)?;
-        if let Home::Embedded = studio.home {
-            for (image, data) in moirecast_spec::embedded_images() {
-                if rev.text.contains(image) {
-                    let path = studio.out.join(image);
-                    let mut one = moirecast_export::OutputSet::new();
-                    let file = path.file_name().expect("an image name").to_string_lossy();
-                    one.add(&file, data.to_vec());
-                    one.commit(path.parent().expect("inside DIR"))?;
-                }
-            }
-        }
-        Ok(written.remove(0))
-    })
-    .await;
-    match result {
-        Ok(path) => Json(json!({"saved": path.display().to_string()})).into_response(),
-        Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, format!("{e:#}")),
-    }
+/// 422 with a refused spec's errors and the revision that stays.
+fn refused(studio: &Studio, errors: Vec<serde_json::Value>) -> Response {
+    (
+        StatusCode::UNPROCESSABLE_ENTITY,
+        Json(json!({"errors": errors, "revision": studio.current().number})),
+    )
+        .into_response()
+}
+
+/// Makes the valid `spec` (of `text`) the current revision, which stops
+/// the builds of the one it replaces; 200 with the new state.
+fn make_current(studio: &Studio, text: String, spec: Spec) -> Response {
+    let number = studio.revisions.fetch_add(1, Ordering::Relaxed) + 1;
+    let rev = Arc::new(Revision::new(number, text, spec));
+    let old = std::mem::replace(
+        &mut *studio.current.write().expect("not poisoned"),
+        rev.clone(),
+    );
+    old.replaced.store(true, Ordering::SeqCst);
+    Json(studio.state(&rev)).into_response()
 }
 
 /// `?name=` of an image added to the spec's folder.
@@ -863,7 +853,7 @@ async fn add_profile(
     Query(q): Query<AddImage>,
     body: axum::body::Bytes,
 ) -> Response {
-    let Home::File { dir, .. } = &studio.home else {
+    let Home::File { dir, .. } = studio.home() else {
         return error(
             StatusCode::CONFLICT,
             "the built-in design has no folder for images: start the studio on a spec file (moirecast studio SPEC) and drop the image there",
@@ -876,46 +866,6 @@ async fn add_profile(
         Ok(Err(why)) => error(StatusCode::BAD_REQUEST, why),
         Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
     }
-}
-
-/// The PNG images the spec may name: inside its folder, two levels deep.
-async fn profiles(State(studio): State<Arc<Studio>>) -> Json<Vec<String>> {
-    let found = match &studio.home {
-        Home::Embedded => moirecast_spec::embedded_images()
-            .map(|(n, _)| n.to_string())
-            .collect(),
-        Home::File { dir, .. } => {
-            let mut found = Vec::new();
-            let pngs = |sub: &Path, found: &mut Vec<String>, dirs: &mut Vec<PathBuf>| {
-                for entry in std::fs::read_dir(dir.join(sub))
-                    .into_iter()
-                    .flatten()
-                    .flatten()
-                {
-                    let name = sub.join(entry.file_name());
-                    match entry.file_type() {
-                        Ok(t) if t.is_dir() => dirs.push(name),
-                        Ok(_)
-                            if name
-                                .extension()
-                                .is_some_and(|e| e.eq_ignore_ascii_case("png")) =>
-                        {
-                            found.push(name.display().to_string())
-                        }
-                        _ => {}
-                    }
-                }
-            };
-            let mut dirs = Vec::new();
-            pngs(Path::new(""), &mut found, &mut dirs);
-            for sub in dirs {
-                pngs(&sub, &mut found, &mut Vec::new());
-            }
-            found.sort();
-            found
-        }
-    };
-    Json(found)
 }
 
 #[derive(Deserialize)]

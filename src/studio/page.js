@@ -290,8 +290,10 @@ async function sendSpec(request, keys, quiet = false, how = "edit") {
   return true;
 }
 
+// `how` "open": another spec file, whose history starts anew.
 function applyState(state, how = "edit") {
-  if (studio.text !== undefined && state.spec !== studio.text) {
+  if (how === "open") { studio.history = []; studio.future = []; studio.savedText = state.spec; studio.refused.clear(); }
+  else if (studio.text !== undefined && state.spec !== studio.text) {
     if (how === "undo") studio.future.push(studio.text);
     else { studio.history.push(studio.text); if (how !== "redo") studio.future = []; }
   }
@@ -753,6 +755,53 @@ $("save").addEventListener("click", async () => {
   setStatus(response.ok ? `saved ${body.saved}` : body.error || `HTTP ${response.status}`);
   if (response.ok) { studio.savedText = studio.text; showSaved(); }
 });
+// Save as: a name in the spec's folder, which becomes the spec file;
+// another file of that name is replaced only once confirmed.
+$("save-as").addEventListener("click", async () => {
+  const name = encodeURIComponent($("save-as-name").value);
+  let response = await api(`/api/save-as?name=${name}`, { method: "POST" });
+  let body = await response.json().catch(() => ({}));
+  if (response.status === 409 && body.exists) {
+    if (!confirm(body.error)) { setStatus("not saved"); return; }
+    response = await api(`/api/save-as?name=${name}&replace=true`, { method: "POST" });
+    body = await response.json().catch(() => ({}));
+  }
+  if (!response.ok) { setStatus(body.error || `HTTP ${response.status}`); return; }
+  setStatus(`saved ${body.saved}`);
+  studio.savedText = studio.text;
+  $("spec-file").textContent = body.state.spec_file;
+  showSaved();
+  listSpecs();
+  setProfileChoices(await (await api("/api/profiles")).json());
+});
+
+// Open: another spec of the folder; unsaved changes are left only once
+// confirmed, and a spec that does not build is refused with its errors.
+async function listSpecs() {
+  const body = await (await api("/api/specs")).json();
+  const select = $("open-name");
+  select.replaceChildren(...body.specs.map((n) => new Option(n, n)));
+  const file = ($("spec-file").textContent || "").split("/").pop();
+  if (body.specs.includes(file)) select.value = file;
+  $("open").disabled = !body.specs.length;
+}
+$("open").addEventListener("click", async () => {
+  const name = $("open-name").value;
+  if (!name) return;
+  if (studio.text !== studio.savedText && !confirm(`The spec has unsaved changes. Open ${name} and leave them?`)) return;
+  const response = await api(`/api/open?name=${encodeURIComponent(name)}`, { method: "POST" });
+  const body = await response.json().catch(() => ({}));
+  if (!response.ok) {
+    const why = body.errors ? body.errors.map((e) => errorText(e, false)).join("\n") : body.error || `HTTP ${response.status}`;
+    $("spec-error").textContent = `${name} was not opened: ${why}`;
+    return;
+  }
+  $("spec-error").textContent = "";
+  setProfileChoices(await (await api("/api/profiles")).json());
+  applyState(body, "open");
+  setStatus(`opened ${body.spec_file}`);
+});
+
 $("undo").addEventListener("click", undo);
 $("redo").addEventListener("click", redo);
 document.addEventListener("keydown", (e) => {
@@ -769,4 +818,5 @@ document.addEventListener("keydown", (e) => {
   buildForm();
   setProfileChoices(await (await api("/api/profiles")).json());
   applyState(await (await api("/api/state")).json());
+  listSpecs();
 })();

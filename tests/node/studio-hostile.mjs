@@ -8,7 +8,7 @@
 //    the page carries a Content-Security-Policy that forbids inline script.
 // 2. A page served from another origin (another port of 127.0.0.1) tries
 //    what any web page the user visits could: POST /api/write, POST
-//    /api/save and PUT /api/spec, with fetch (no-cors, text/plain, which
+//    /api/save, /api/save-as, /api/open and PUT /api/spec, with fetch (no-cors, text/plain, which
 //    browsers send without a preflight) and with a form. The studio
 //    refuses every one: nothing is written, the spec file and the design
 //    are unchanged. The studio cannot be framed by it either.
@@ -41,6 +41,8 @@ window.attempts = (async () => {
   const tries = [
     ["POST", "api/write?what=device", "x"],
     ["POST", "api/save", "x"],
+    ["POST", "api/save-as?name=pwned", "x"],
+    ["POST", "api/open?name=design.toml", "x"],
     ["PUT", "api/spec", "[layout]\\nperiod = 1.0\\n"],
   ];
   for (const [method, path, body] of tries) {
@@ -91,7 +93,8 @@ try {
   check(!framedLoaded, "the studio does not load in another site's frame");
   const written = existsSync(out) ? readdirSync(out) : [];
   check(written.length === 0, `another site's page wrote nothing (out: ${JSON.stringify(written)})`);
-  check(readFileSync(join(work, "design.toml"), "utf8") === specBefore, "another site's page did not rewrite the spec file");
+  check(readFileSync(join(work, "design.toml"), "utf8") === specBefore && !existsSync(join(work, "pwned.toml")),
+    "another site's page did not rewrite the spec file, nor save it as another (pwned.toml)");
   const stateAfter = await (await page.request.get(url + "api/state")).json();
   check(stateAfter.revision === stateBefore.revision && stateAfter.values.layout.period === 0.5,
     `another site's page did not change the design (revision ${stateBefore.revision} → ${stateAfter.revision})`);

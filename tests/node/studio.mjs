@@ -14,7 +14,7 @@
 // saved keeps the spec's comments and changes only its line; a formula
 // surface takes its kind and z together (z shows once the kind is
 // formula; only the keys that apply show); undo and redo step through the
-// revisions, with an unsaved mark; the explore grid marks the
+// revisions, with an unsaved mark; Save as and Open; the explore grid marks the
 // current design's cell, and goes stale when the design changes; at 390 px the
 // page scrolls only down; a dropped PNG becomes the profile. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
 
@@ -210,6 +210,27 @@ try {
   await afovIs(55);
   check(unsavedAfterEdit && !unsavedAfterUndo && fieldAfterUndo === "55",
     "an edit marks the spec unsaved; Ctrl+Z undoes it (afov 50 -> 55, the saved text again), Ctrl+Shift+Z redoes it");
+
+  // Save as: a new name in the spec's folder becomes the spec file; Open
+  // brings back another spec of the folder, asking first about unsaved
+  // changes, and its history starts anew
+  await page.locator("#save-as-name").fill("copy");
+  await page.locator("#save-as").click();
+  await page.waitForFunction(() => document.getElementById("spec-file").textContent.endsWith("copy.toml"), null, { timeout: 30000 });
+  const copied = existsSync(join(work, "copy.toml")) ? readFileSync(join(work, "copy.toml"), "utf8") : "";
+  await page.locator("#f-lens-afov").fill("52");
+  await page.locator("#f-lens-afov").press("Tab");
+  await afovIs(52);
+  await page.waitForFunction(() => [...document.getElementById("open-name").options].map((o) => o.value).join() === "copy.toml,design.toml", null, { timeout: 30000 });
+  await page.locator("#open-name").selectOption("design.toml");
+  let asked = "";
+  page.once("dialog", (d) => { asked = d.message(); d.accept(); });
+  await page.locator("#open").click();
+  await page.waitForFunction(() => document.getElementById("spec-file").textContent.endsWith("design.toml"), null, { timeout: 30000 });
+  await afovIs(55);
+  const opened = await page.evaluate(() => ({ unsaved: !document.getElementById("unsaved").hidden, undo: document.getElementById("undo").disabled }));
+  check(copied === saved && asked.includes("unsaved") && !opened.unsaved && opened.undo,
+    `Save as writes copy.toml and makes it the spec file; Open asks about unsaved changes (${JSON.stringify(asked)}) and opens design.toml, its history anew`);
 
   // the explore grid marks the current design's cell
   await page.locator("#run-explore").click();
