@@ -32,6 +32,8 @@ use std::path::{Path, PathBuf};
 pub const A_VALUES: [f64; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
 /// Offsets d as multiples of the standard lens's focal depth D_s.
 pub const D_RATIOS: [f64; 5] = [0.6, 0.8, 1.0, 1.2, 1.4];
+/// Cells of the grid.
+pub const CELLS: usize = A_VALUES.len() * D_RATIOS.len();
 
 /// The mesh tolerance (mm) of explore's cells when the spec asks for a finer
 /// one: a preview does not need the 2 µm of a cast device. On the reference
@@ -238,7 +240,7 @@ pub fn explore_grid(
 ) -> Result<ExploreGrid> {
     let base = &spec.design;
     let ds = base.standard.focal_depth;
-    progress.stage("exploring (a, d)", (A_VALUES.len() * D_RATIOS.len()) as u64);
+    progress.stage("exploring (a, d)", CELLS as u64);
     let lighting = options.lights.lighting(base)?;
     let blank = Rgb8 {
         width: options.size,

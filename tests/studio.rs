@@ -632,3 +632,80 @@ fn save_as_and_open_stay_in_the_specs_folder() {
     );
     assert_eq!(read(&dir.join("design.toml")), SMALL.as_bytes());
 }
+
+/// The reference spec, whose grid takes long enough to cancel.
+const REFERENCE: &str = include_str!("../molds/saddle-horse.toml");
+
+#[test]
+fn scoring_the_grid_shows_its_progress_and_can_be_cancelled() {
+    let studio = Studio::start("scoring", REFERENCE);
+    let progress = |studio: &Studio| studio.get("/api/explore/progress").json();
+    let idle = progress(&studio);
+    assert_eq!(
+        (idle["done"].as_u64(), idle["total"].as_u64()),
+        (Some(0), Some(25))
+    );
+    assert_eq!(
+        (idle["running"].as_bool(), idle["scored"].as_bool()),
+        (Some(false), Some(false))
+    );
+    // nothing to cancel
+    let r = studio.request("POST", "/api/explore/cancel", b"");
+    assert_eq!(r.json()["cancelled"], false);
+
+    let port = studio.port;
+    let scoring = std::thread::spawn(move || {
+        http::request(
+            port,
+            &format!("127.0.0.1:{port}"),
+            "GET",
+            "/api/explore",
+            b"",
+        )
+    });
+    // once a cell is done, cancel: the request answers "cancelled" after
+    // the cells being scored, short of the whole grid
+    let started = std::time::Instant::now();
+    while progress(&studio)["done"].as_u64() < Some(1) {
+        assert!(started.elapsed().as_secs() < 120, "no cell was scored");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    assert_eq!(
+        studio.request("POST", "/api/explore/cancel", b"").json()["cancelled"],
+        true
+    );
+    let r = scoring.join().unwrap();
+    assert_eq!(r.status, 422, "{}", String::from_utf8_lossy(&r.body));
+    assert!(r.json()["error"].as_str().unwrap().starts_with("cancelled"));
+    let stopped = progress(&studio);
+    assert!(stopped["done"].as_u64().unwrap() < 25, "{stopped}");
+    assert_eq!(
+        (stopped["running"].as_bool(), stopped["scored"].as_bool()),
+        (Some(false), Some(false))
+    );
+
+    // a cancelled grid is not kept: the next request scores it whole (on
+    // a small design, a revision of its own), here started without
+    // waiting, as the page does, and followed until it is scored
+    assert_eq!(
+        studio.request("PUT", "/api/spec", SMALL.as_bytes()).status,
+        200
+    );
+    assert_eq!(
+        studio.request("POST", "/api/explore/start", b"").status,
+        202
+    );
+    let started = std::time::Instant::now();
+    while progress(&studio)["scored"] != true {
+        assert!(started.elapsed().as_secs() < 120, "the grid was not scored");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let r = studio.get("/api/explore");
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(r.json()["cells"].as_array().unwrap().len(), 25);
+    let whole = progress(&studio);
+    assert_eq!(
+        (whole["done"].as_u64(), whole["scored"].as_bool()),
+        (Some(25), Some(true))
+    );
+}

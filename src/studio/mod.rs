@@ -42,7 +42,7 @@ use std::path::{Component, Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock, RwLock};
 use tokio::sync::broadcast;
-use views::{DeviceView, ExploreView, MoldView};
+use views::{DeviceView, ExploreView, MoldView, Scoring};
 
 /// Request bodies larger than this are refused with 413.
 pub const MAX_BODY_BYTES: usize = 1_000_000;
@@ -110,7 +110,7 @@ pub struct Revision {
     frames: Frames,
     device: Built<DeviceView>,
     mold: Built<MoldView>,
-    explore: Built<ExploreView>,
+    scoring: Scoring,
     /// Set once a newer revision replaces this one: its builds stop.
     replaced: AtomicBool,
 }
@@ -125,7 +125,7 @@ impl Revision {
             spec,
             device: OnceLock::new(),
             mold: OnceLock::new(),
-            explore: OnceLock::new(),
+            scoring: Scoring::default(),
             replaced: AtomicBool::new(false),
         }
     }
@@ -139,8 +139,17 @@ impl Revision {
         self.cached(|rev| &rev.mold, MoldView::build).await
     }
 
+    /// The explore grid, scored on the first request (see [`Scoring`]).
     async fn explore(self: &Arc<Self>) -> Result<Arc<ExploreView>, String> {
-        self.cached(|rev| &rev.explore, ExploreView::build).await
+        let ticket = self.scoring.request();
+        let rev = self.clone();
+        blocking(move || rev.score(ticket)).await
+    }
+
+    /// The explore grid for a request's `ticket` (blocking).
+    fn score(&self, ticket: u64) -> Result<Arc<ExploreView>, String> {
+        let words = |e| page_words(e, &self.spec.origin);
+        self.scoring.grid(ticket, &self.spec, &self.replaced, words)
     }
 
     /// What `build` makes of the spec, built once into the revision's
@@ -455,6 +464,9 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
         .route("/api/device.stl", get(device_stl))
         .route("/api/mold/{part}", get(mold_stl))
         .route("/api/explore", get(explore))
+        .route("/api/explore/progress", get(explore_progress))
+        .route("/api/explore/start", post(explore_start))
+        .route("/api/explore/cancel", post(explore_cancel))
         .route("/api/explore/{cell}", get(explore_cell))
         .route("/api/write", post(write))
         .route("/api/events", get(events))
@@ -999,6 +1011,32 @@ async fn explore(State(studio): State<Arc<Studio>>) -> Response {
         .into_response(),
         Err(e) => error(StatusCode::UNPROCESSABLE_ENTITY, e),
     }
+}
+
+/// How far the current revision's grid is scored: cells done of all.
+async fn explore_progress(State(studio): State<Arc<Studio>>) -> Json<serde_json::Value> {
+    let rev = studio.current();
+    let mut progress = json!(rev.scoring.progress());
+    progress["revision"] = json!(rev.number);
+    Json(progress)
+}
+
+/// Starts scoring the current revision's grid, unless it is scored, and
+/// answers at once (202): the page follows it on `/api/explore/progress`
+/// and fetches it from `/api/explore` once scored, holding no connection
+/// meanwhile (a browser has six per site).
+async fn explore_start(State(studio): State<Arc<Studio>>) -> Response {
+    let rev = studio.current();
+    let ticket = rev.scoring.request();
+    let number = rev.number;
+    tokio::task::spawn_blocking(move || rev.score(ticket));
+    (StatusCode::ACCEPTED, Json(json!({"revision": number}))).into_response()
+}
+
+/// Stops the current revision's scoring after the cells being scored;
+/// its request then answers "cancelled", and the next one scores afresh.
+async fn explore_cancel(State(studio): State<Arc<Studio>>) -> Json<serde_json::Value> {
+    Json(json!({"cancelled": studio.current().scoring.cancel()}))
 }
 
 async fn explore_cell(

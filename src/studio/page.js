@@ -454,10 +454,50 @@ function designSignature(values) {
   return JSON.stringify(copy);
 }
 
+// Scoring the grid: started with one short request, followed by polling
+// its progress (cells done of 25), so no request is held open meanwhile
+// (a browser has six connections per site, and a cancel must get
+// through); Cancel stops it after the cells being scored.
+function showScoring(scoring) {
+  $("run-explore").disabled = scoring;
+  $("cancel-explore").hidden = !scoring;
+  $("cancel-explore").disabled = false;
+  $("explore-progress").hidden = !scoring;
+  studio.cancelling = false;
+}
+async function pollScoring() {
+  const p = await (await api("/api/explore/progress")).json().catch(() => null);
+  if (!p) { studio.scoringTimer = setTimeout(pollScoring, 250); return; }
+  if (p.scored) { showScoring(false); showGrid(); return; }
+  if (!p.running && p.pending === 0) {
+    showScoring(false);
+    $("explore-status").textContent = p.cancelled
+      ? `cancelled after ${p.done} of ${p.total} cells; the grid was not scored`
+      : "not scored: the design changed while it was scored; score it again";
+    return;
+  }
+  if (!studio.cancelling) {
+    $("explore-progress").max = p.total; $("explore-progress").value = p.done;
+    $("explore-status").textContent = p.running ? `scoring: ${p.done} of ${p.total} cells` : "scoring: waiting to start…";
+  }
+  studio.scoringTimer = setTimeout(pollScoring, 250);
+}
+$("cancel-explore").addEventListener("click", async () => {
+  $("cancel-explore").disabled = true;
+  studio.cancelling = true;
+  $("explore-status").textContent = "cancelling after the cells being scored…";
+  await api("/api/explore/cancel", { method: "POST" });
+});
 $("run-explore").addEventListener("click", async () => {
   $("explore-status").textContent = "scoring 25 cells…";
+  showScoring(true);
+  const started = await api("/api/explore/start", { method: "POST" });
+  if (!started.ok) { showScoring(false); $("explore-status").textContent = `HTTP ${started.status}`; return; }
+  pollScoring();
+});
+async function showGrid() {
   const response = await api("/api/explore");
-  const grid = await response.json();
+  const grid = await response.json().catch(() => ({ error: `HTTP ${response.status}` }));
   if (!response.ok) { $("explore-status").textContent = grid.error; return; }
   studio.grid = { signature: designSignature(studio.values), cells: grid.cells, best: grid.best };
   const box = $("grid");
@@ -476,7 +516,7 @@ $("run-explore").addEventListener("click", async () => {
     box.appendChild(fig);
   });
   markGrid();
-});
+}
 
 // The current design's cell, and whether the grid is stale.
 function markGrid() {

@@ -10,6 +10,8 @@ use moirecast_export::stl_bytes;
 use moirecast_kernel::check::SolidMesh;
 use moirecast_kernel::progress::{Progress, Silent};
 use moirecast_spec::Spec;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 
 /// The device as the page shows it: its STL and its report.
 pub struct DeviceView {
@@ -115,5 +117,137 @@ impl ExploreView {
             cells: grid.cells,
             best: grid.best,
         })
+    }
+}
+
+/// The explore grid of one revision: scored once on request, with its
+/// progress (cells done) readable meanwhile, and a cancel that stops every
+/// request made before it, running or still waiting to start, after the
+/// cells being scored. A cancelled grid is not kept: a later request scores
+/// it afresh.
+#[derive(Default)]
+pub struct Scoring {
+    done: AtomicU64,
+    running: AtomicBool,
+    /// Requests made so far (each one's ticket is its number).
+    requested: AtomicU64,
+    /// Requests still waiting or running.
+    pending: AtomicU64,
+    /// Requests up to this ticket are cancelled.
+    cancelled_upto: AtomicU64,
+    /// Whether the last request answered was cancelled.
+    last_cancelled: AtomicBool,
+    grid: Mutex<Option<Result<Arc<ExploreView>, String>>>,
+}
+
+/// What [`Scoring::progress`] reports.
+#[derive(serde::Serialize)]
+pub struct ScoringProgress {
+    pub done: u64,
+    pub total: u64,
+    pub running: bool,
+    /// Requests the server has, waiting or running.
+    pub pending: u64,
+    pub scored: bool,
+    /// Whether the last request answered was cancelled.
+    pub cancelled: bool,
+}
+
+/// One request's scoring: ticks count the cells done; it is cancelled by
+/// the page (a cancel after its request) or by a newer revision.
+struct Ticks<'a> {
+    scoring: &'a Scoring,
+    ticket: u64,
+    replaced: &'a AtomicBool,
+}
+
+impl Progress for Ticks<'_> {
+    fn tick(&self, n: u64) {
+        self.scoring.done.fetch_add(n, Ordering::Relaxed);
+    }
+    fn cancelled(&self) -> bool {
+        self.scoring.cancelled_upto.load(Ordering::SeqCst) >= self.ticket
+            || self.replaced.load(Ordering::SeqCst)
+    }
+}
+
+/// Counts a request as pending until it is answered.
+struct Pending<'a>(&'a AtomicU64);
+
+impl Drop for Pending<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+impl Scoring {
+    /// A request for the grid, made now: its ticket for
+    /// [`grid`](Self::grid), which a cancel from now on stops. It is
+    /// pending until `grid` answers it.
+    pub fn request(&self) -> u64 {
+        self.pending.fetch_add(1, Ordering::SeqCst);
+        self.requested.fetch_add(1, Ordering::SeqCst) + 1
+    }
+
+    /// The grid for `ticket`, scored now if it has not been (blocking; one
+    /// scoring at a time, a later caller waits for the first's grid).
+    /// `words` puts an error in the page's words.
+    pub fn grid(
+        &self,
+        ticket: u64,
+        spec: &Spec,
+        replaced: &AtomicBool,
+        words: impl Fn(anyhow::Error) -> String,
+    ) -> Result<Arc<ExploreView>, String> {
+        const CANCELLED: &str = "cancelled: the grid was not scored";
+        let _answered = Pending(&self.pending);
+        let mut grid = self.grid.lock().expect("not poisoned");
+        if let Some(scored) = grid.as_ref() {
+            return scored.clone();
+        }
+        let ticks = Ticks {
+            scoring: self,
+            ticket,
+            replaced,
+        };
+        if !ticks.cancelled() {
+            self.done.store(0, Ordering::Relaxed);
+            self.last_cancelled.store(false, Ordering::SeqCst);
+            self.running.store(true, Ordering::SeqCst);
+            let scored = ExploreView::build(spec, &ticks)
+                .map(Arc::new)
+                .map_err(&words);
+            self.running.store(false, Ordering::SeqCst);
+            if !(ticks.cancelled() && scored.is_err()) {
+                *grid = Some(scored.clone());
+                return scored;
+            }
+        }
+        self.last_cancelled.store(true, Ordering::SeqCst);
+        Err(CANCELLED.into())
+    }
+
+    /// The grid once scored, without scoring it.
+    pub fn scored(&self) -> Option<Result<Arc<ExploreView>, String>> {
+        self.grid.try_lock().ok().and_then(|g| g.clone())
+    }
+
+    pub fn progress(&self) -> ScoringProgress {
+        ScoringProgress {
+            done: self.done.load(Ordering::Relaxed),
+            total: crate::explore::CELLS as u64,
+            running: self.running.load(Ordering::SeqCst),
+            pending: self.pending.load(Ordering::SeqCst),
+            scored: self.scored().is_some(),
+            cancelled: self.last_cancelled.load(Ordering::SeqCst),
+        }
+    }
+
+    /// Cancels every request made so far; whether one was waiting or
+    /// running.
+    pub fn cancel(&self) -> bool {
+        let made = self.requested.load(Ordering::SeqCst);
+        self.cancelled_upto.fetch_max(made, Ordering::SeqCst);
+        self.pending.load(Ordering::SeqCst) > 0
     }
 }

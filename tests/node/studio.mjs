@@ -14,8 +14,8 @@
 // saved keeps the spec's comments and changes only its line; a formula
 // surface takes its kind and z together (z shows once the kind is
 // formula; only the keys that apply show); undo and redo step through the
-// revisions, with an unsaved mark; Save as and Open; the explore grid marks the
-// current design's cell, and goes stale when the design changes; at 390 px the
+// revisions, with an unsaved mark; Save as and Open; scoring the explore grid shows its
+// progress and can be cancelled; the grid marks the current design's cell, and goes stale when the design changes; at 390 px the
 // page scrolls only down; a dropped PNG becomes the profile. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
 
 import { existsSync, readFileSync } from "node:fs";
@@ -231,6 +231,23 @@ try {
   const opened = await page.evaluate(() => ({ unsaved: !document.getElementById("unsaved").hidden, undo: document.getElementById("undo").disabled }));
   check(copied === saved && asked.includes("unsaved") && !opened.unsaved && opened.undo,
     `Save as writes copy.toml and makes it the spec file; Open asks about unsaved changes (${JSON.stringify(asked)}) and opens design.toml, its history anew`);
+
+  // scoring the grid shows its progress and can be cancelled
+  // (the status as it changes: a small grid is scored within a second)
+  await page.evaluate(() => {
+    window.statuses = [];
+    new MutationObserver(() => window.statuses.push(document.getElementById("explore-status").textContent))
+      .observe(document.getElementById("explore-status"), { childList: true, characterData: true, subtree: true });
+  });
+  await page.locator("#run-explore").click();
+  await page.waitForFunction(() => window.statuses.some((s) => /^scoring: /.test(s)), null, { timeout: 120000 });
+  const scoringShown = await page.evaluate(() => ({ status: window.statuses.find((s) => /^scoring: /.test(s)), bar: !document.getElementById("explore-progress").hidden }));
+  await page.locator("#cancel-explore").click();
+  await page.waitForFunction(() => document.getElementById("explore-status").textContent.startsWith("cancelled"), null, { timeout: 120000 });
+  const cancelled = await page.evaluate(() => ({ status: document.getElementById("explore-status").textContent, cells: document.getElementById("grid").children.length, again: !document.getElementById("run-explore").disabled }));
+  const counted = await page.evaluate(() => window.statuses.filter((s) => /^scoring: [0-9]+ of 25 cells$/.test(s)));
+  check(scoringShown.bar && /^cancelled after [0-9]+ of 25 cells/.test(cancelled.status) && cancelled.cells === 0 && cancelled.again,
+    `scoring shows its progress (${JSON.stringify(counted.length ? counted : scoringShown.status)}) and Cancel stops it: ${JSON.stringify(cancelled.status)}`);
 
   // the explore grid marks the current design's cell
   await page.locator("#run-explore").click();
