@@ -2,6 +2,7 @@
 //! the design fuzzer) can tell a refused input from a bug in moirecast.
 
 use moirecast_kernel::check::CheckResult;
+use moirecast_kernel::checks::check_doc;
 use moirecast_kernel::KernelError;
 use moirecast_mold::MoldError;
 use moirecast_spec::{Spec, SpecError};
@@ -22,9 +23,12 @@ pub enum RunError {
     #[error("{message}")]
     MoldMisfit { message: String, error: MoldError },
     /// A check failed on the mesh of an accepted spec: a bug.
-    #[error("check `{name}` failed: measured {value} {unit} against limit {limit} ({detail}).\n  {BUG}.{hint}")]
+    #[error("check `{name}` ({label}) failed: measured {value} {unit}, where it must be {bound} {limit} ({detail}).\n  {BUG}.{hint}")]
     CheckFailed {
         name: &'static str,
+        /// The registry's label and bound words ("at most", …).
+        label: &'static str,
+        bound: &'static str,
         value: f64,
         limit: f64,
         unit: &'static str,
@@ -75,6 +79,8 @@ impl RunError {
             None => Ok(()),
             Some(c) => Err(RunError::CheckFailed {
                 name: c.name,
+                label: check_doc(c.name).map_or(c.name, |d| d.label),
+                bound: check_doc(c.name).map_or("within", |d| d.bound.words()),
                 value: c.value,
                 limit: c.limit,
                 unit: c.unit,

@@ -377,7 +377,7 @@ pub fn run_explore(
         cells,
         best,
     };
-    let (written, bytes) = commit_with_report(files, &report, out)?;
+    let (written, bytes) = commit_with_report(files, spec, &report, out)?;
     Ok(ExploreOutcome {
         written,
         bytes,

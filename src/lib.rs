@@ -294,7 +294,7 @@ pub fn run_device(
     let mut files = OutputSet::new();
     files.add("device.stl", stl);
     files.add("device.step", StepFile(step.step));
-    let (written, bytes) = commit_with_report(files, &report, out)?;
+    let (written, bytes) = commit_with_report(files, spec, &report, out)?;
     progress.tick(1);
     let outcome = DeviceOutcome::new(
         written,
@@ -340,9 +340,11 @@ pub(crate) fn refuse_failed(checks: &[CheckResult]) -> Result<(), RunError> {
 /// returns the paths written and their total size.
 pub(crate) fn commit_with_report(
     mut files: OutputSet,
+    spec: &Spec,
     report: &impl serde::Serialize,
     out: &Path,
 ) -> Result<(Vec<PathBuf>, usize)> {
+    add_spec(&mut files, &spec.source)?;
     // the report lists every other file of the run with its SHA-256
     #[derive(serde::Serialize)]
     struct WithDigests<'a, R: serde::Serialize> {
@@ -355,6 +357,40 @@ pub(crate) fn commit_with_report(
     files.add("report.json", (text + "\n").into_bytes());
     let bytes = files.sizes().iter().map(|(_, b)| b).sum();
     Ok((files.commit_run(out)?, bytes))
+}
+
+/// The run's own copy of the spec that made it, so that its folder can be
+/// rebuilt (`moirecast device DIR/spec.toml`): `spec.toml`, the exact text,
+/// and the profile image it read, at the path the spec names. An image
+/// named outside the folder (`..`, an absolute path) or by a run's own file
+/// name is kept as `profiles/NAME` instead, and only the copy's
+/// `profile.image` says so.
+fn add_spec(files: &mut OutputSet, source: &moirecast_spec::SpecSource) -> Result<()> {
+    use moirecast_spec::{EditValue, SpecEdit};
+    use std::path::Component;
+    let mut text = source.text.clone();
+    if let Some((name, bytes)) = &source.image {
+        let path = Path::new(name);
+        let taken = files.sizes().iter().any(|(n, _)| n == name) || name == "spec.toml";
+        let inside = path.components().all(|c| matches!(c, Component::Normal(_)));
+        let kept = if inside && !taken {
+            name.clone()
+        } else {
+            let file = path
+                .file_name()
+                .map_or("profile.png".into(), |f| f.to_string_lossy());
+            let kept = format!("profiles/{file}");
+            let edit = SpecEdit {
+                key: "profile.image".into(),
+                value: Some(EditValue::Text(kept.clone())),
+            };
+            text = moirecast_spec::apply_edits(&text, &[edit])?;
+            kept
+        };
+        files.add(&kept, bytes.clone());
+    }
+    files.add("spec.toml", text.into_bytes());
+    Ok(())
 }
 
 /// What `moirecast mold` wrote, for the summary it prints.
@@ -526,7 +562,7 @@ pub fn run_mold(
     files.add("mold-bottom.step", StepFile(halves.bottom_step));
     moirecast_export::free_in_background(step.brep);
     let casting = report.casting.line();
-    let (written, bytes) = commit_with_report(files, &report, out)?;
+    let (written, bytes) = commit_with_report(files, spec, &report, out)?;
     progress.tick(1);
     Ok(MoldOutcome {
         written,

@@ -337,7 +337,7 @@ pub(crate) fn write_printed_device(
             crosscheck: None,
         },
     );
-    let (written, bytes) = commit_with_report(files, &report, out)?;
+    let (written, bytes) = commit_with_report(files, spec, &report, out)?;
     progress.tick(1);
     let b = &printed.bodies;
     let outcome = DeviceOutcome::new(

@@ -431,7 +431,7 @@ pub fn run_render(
         best_contrast: reports.get(best).map_or(0.0, |r| r.contrast),
         frames: reports,
     };
-    let (written, bytes) = commit_with_report(files, &report, out)?;
+    let (written, bytes) = commit_with_report(files, spec, &report, out)?;
     Ok(RenderOutcome {
         written,
         bytes,

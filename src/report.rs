@@ -123,7 +123,15 @@ pub struct LensReport {
 #[derive(Serialize)]
 pub struct CheckReport {
     pub name: &'static str,
+    /// The registry's human label (docs/checks.md).
+    pub label: &'static str,
+    /// The part it is about: device, mold top, mold bottom, mold, cavity,
+    /// device B-rep or mold B-rep.
+    pub part: &'static str,
     pub value: f64,
+    /// How the value is held against the limit: "at most", "at least",
+    /// "exactly" or "more than".
+    pub bound: &'static str,
     pub limit: f64,
     pub unit: &'static str,
     pub passed: bool,
@@ -132,9 +140,14 @@ pub struct CheckReport {
 
 impl From<&CheckResult> for CheckReport {
     fn from(c: &CheckResult) -> Self {
+        use moirecast_kernel::checks::{check_doc, part_of};
+        let doc = check_doc(c.name);
         CheckReport {
             name: c.name,
+            label: doc.map_or(c.name, |d| d.label),
+            part: part_of(c.name, &c.detail),
             value: c.value,
+            bound: doc.map_or("", |d| d.bound.words()),
             limit: c.limit,
             unit: c.unit,
             passed: c.passed,

@@ -85,12 +85,12 @@ fn a_small_design_builds_with_a_full_report() {
             "missing check {name}"
         );
     }
-    // no temporary files left: the three and the run's manifest
+    // no temporary files left: the three, the spec and the run's manifest
     let names: Vec<String> = std::fs::read_dir(&out)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
-    assert_eq!(names.len(), 4, "{names:?}");
+    assert_eq!(names.len(), 5, "{names:?}");
     assert!(names.iter().any(|n| n == ".moirecast-run"), "{names:?}");
     // the B-rep: every lens a face, the walls, and a STEP file of that size
     let brep = &report["brep"];
@@ -128,7 +128,8 @@ fn a_printed_design_writes_two_bodies_a_3mf_and_their_step_files() {
             "device-clear.step",
             "device-clear.stl",
             "device.3mf",
-            "report.json"
+            "report.json",
+            "spec.toml"
         ]
     );
     let report: serde_json::Value =
@@ -238,12 +239,18 @@ fn a_run_replaces_the_last_one_and_leaves_other_files_alone() {
     names.sort();
     assert_eq!(
         names,
-        [".moirecast-run", "device.step", "device.stl", "report.json"]
+        [
+            ".moirecast-run",
+            "device.step",
+            "device.stl",
+            "report.json",
+            "spec.toml"
+        ]
     );
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
     let digests = report["sha256"].as_object().unwrap();
-    assert_eq!(digests.len(), 2, "{digests:?}");
+    assert_eq!(digests.len(), 3, "{digests:?}");
     assert_eq!(digests["device.stl"].as_str().unwrap().len(), 64);
     let mine = dir.join("mine");
     std::fs::create_dir_all(&mine).unwrap();
@@ -347,7 +354,8 @@ fn a_plane_seen_straight_down_builds_the_uncompensated_base() {
         let files: Vec<(String, Vec<u8>)> = std::fs::read_dir(&out)
             .unwrap()
             .map(|e| e.unwrap().file_name().into_string().unwrap())
-            .filter(|f| f != "report.json")
+            // the specs differ in view.compensate alone
+            .filter(|f| f != "report.json" && f != "spec.toml")
             .map(|f| (f.clone(), read(&f)))
             .collect();
         let report: serde_json::Value = serde_json::from_slice(&read("report.json")).unwrap();
@@ -438,6 +446,7 @@ fn render_writes_frames_sheet_gif_and_fidelity_deterministically() {
         "sheet.png",
         "tilt.gif",
         "report.json",
+        "spec.toml",
     ];
     for f in names {
         let (x, y) = (
@@ -902,4 +911,58 @@ fn a_surface_that_cannot_release_along_z_is_refused() {
         "{err}"
     );
     assert!(!out.exists());
+}
+
+/// A run's folder holds the exact spec that made it and the image it read,
+/// so that it rebuilds itself: an image beside the spec keeps its path, one
+/// named from outside the folder (`../`) is kept as `profiles/NAME`.
+#[test]
+fn a_run_folder_holds_its_spec_and_rebuilds_the_same_files() {
+    let dir = scratch("carries-spec");
+    let horse = concat!(env!("CARGO_MANIFEST_DIR"), "/molds/profiles/horse.png");
+    std::fs::create_dir_all(dir.join("images")).unwrap();
+    std::fs::create_dir_all(dir.join("specs")).unwrap();
+    std::fs::copy(horse, dir.join("images/horse.png")).unwrap();
+    let text = SMALL.replace(
+        "kind = \"bump\"\nsigma = 1.5",
+        "image = \"../images/horse.png\"   # my horse",
+    );
+    std::fs::write(dir.join("specs/mine.toml"), &text).unwrap();
+    let device = |spec: &Path, out: &Path| {
+        let o = Command::new(BIN)
+            .args([
+                "device",
+                spec.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+                "-q",
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    let (first, second) = (dir.join("first"), dir.join("second"));
+    device(&dir.join("specs/mine.toml"), &first);
+    let kept = std::fs::read_to_string(first.join("spec.toml")).unwrap();
+    assert_eq!(
+        kept,
+        text.replace("../images/horse.png", "profiles/horse.png"),
+        "only the image's path changes"
+    );
+    assert_eq!(
+        std::fs::read(first.join("profiles/horse.png")).unwrap(),
+        std::fs::read(horse).unwrap()
+    );
+    device(&first.join("spec.toml"), &second);
+    for f in [
+        "device.stl",
+        "device.step",
+        "spec.toml",
+        "profiles/horse.png",
+    ] {
+        assert!(
+            std::fs::read(first.join(f)).unwrap() == std::fs::read(second.join(f)).unwrap(),
+            "{f} differs when the folder is rebuilt from its own spec"
+        );
+    }
 }

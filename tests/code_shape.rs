@@ -265,3 +265,19 @@ fn cited_corpus_cases_exist() {
         missing.join("\n")
     );
 }
+
+/// `docs/checks.md` is what the registry of checks says;
+/// `MOIRECAST_BLESS=1` rewrites it.
+#[test]
+fn docs_checks_md_is_current() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/docs/checks.md");
+    let want = moirecast_kernel::checks::markdown();
+    if std::env::var_os("MOIRECAST_BLESS").is_some() {
+        std::fs::write(path, &want).unwrap();
+    }
+    let have = std::fs::read_to_string(path).unwrap_or_default();
+    assert!(
+        have == want,
+        "docs/checks.md is stale: run `MOIRECAST_BLESS=1 cargo test --test code_shape`"
+    );
+}

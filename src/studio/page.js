@@ -367,12 +367,19 @@ function showFrameState() {
     : "";
 }
 
+// A frame of 256 px while a slider moves; at rest, as many pixels as the
+// frame shows (a wide screen's), up to 512.
+function frameSize(samples) {
+  const shown = $("frame").getBoundingClientRect().width * (window.devicePixelRatio || 1);
+  return String(samples >= 4 && shown > 320 ? Math.min(512, Math.ceil(shown / 64) * 64) : 256);
+}
+
 async function requestFrame(samples = 4) {
   if (frameInFlight) { framePending = Math.max(framePending || 0, samples); showFrameState(); return; }
   frameInFlight = true; framePending = null;
   showFrameState();
   const tilt = $("tilt").value, along = $("along").value;
-  const params = new URLSearchParams({ tilt, along, size: "256", samples: String(samples), lights: lightsParam() });
+  const params = new URLSearchParams({ tilt, along, size: frameSize(samples), samples: String(samples), lights: lightsParam() });
   try {
     const response = await api("/api/frame.png?" + params);
     if (response.ok) {
@@ -427,20 +434,50 @@ async function loadReport() {
     $("checks-status").replaceChildren(fail);
     return;
   }
-  const checks = (report.checks || []).concat(report.mold ? report.mold.checks : []);
-  const failed = checks.filter((c) => !c.passed).length;
-  $("checks-status").textContent = `${checks.length} checks, ${failed} failed; ${report.mesh.triangles} triangles`;
-  for (const c of checks) {
-    const li = document.createElement("li");
-    li.title = c.detail;
-    li.innerHTML = `<span class="${c.passed ? "pass" : "fail"}">${c.passed ? "✓" : "✗"}</span><span></span><span class="scores"></span>`;
-    li.children[1].textContent = c.name;
-    li.children[2].textContent = `${Number(c.value).toPrecision(3)} / ${Number(c.limit).toPrecision(3)} ${c.unit}`;
-    list.appendChild(li);
-  }
+  showChecks((report.checks || []).concat(report.mold ? report.mold.checks : []), report.mesh.triangles);
   const warnings = ((report.view && report.view.warnings) || []).concat(report.mold ? report.mold.warnings : []);
   $("warnings").replaceChildren();
   for (const w of warnings) { const p = document.createElement("div"); p.className = "warn"; p.textContent = "warning: " + w; $("warnings").appendChild(p); }
+}
+
+// The checks, grouped by the part they are about, each with its label from
+// the registry and its limit as a maximum (≤) or a minimum (≥); a failed
+// check turns the section red, and is named in a banner and in the header.
+const BOUND_SIGN = { "at most": "≤", "at least": "≥", "exactly": "=", "more than": ">" };
+function showChecks(checks, triangles) {
+  const failed = checks.filter((c) => !c.passed);
+  $("checks").classList.toggle("failed", failed.length > 0);
+  const banner = $("checks-failed");
+  banner.hidden = !failed.length;
+  banner.textContent = failed.length ? `✗ ${failed.length} check${failed.length > 1 ? "s" : ""} failed: ${failed.map((c) => `${c.label} (${c.part})`).join(", ")}` : "";
+  $("header-failed").hidden = !failed.length;
+  $("header-failed").textContent = failed.length ? `✗ ${failed.length} failed check${failed.length > 1 ? "s" : ""}` : "";
+  $("checks-status").textContent = `${checks.length} checks, ${failed.length ? `${failed.length} failed` : "all passed"}; ${triangles} triangles`;
+  const list = $("check-list");
+  list.replaceChildren();
+  const parts = [...new Set(checks.map((c) => c.part))];
+  for (const part of parts) {
+    const mine = checks.filter((c) => c.part === part);
+    const bad = mine.filter((c) => !c.passed).length;
+    const head = document.createElement("li");
+    head.className = "part";
+    head.textContent = `${part[0].toUpperCase()}${part.slice(1)}: ${mine.length} checks${bad ? `, ${bad} failed` : ""}`;
+    list.appendChild(head);
+    for (const c of mine) {
+      const li = document.createElement("li");
+      li.className = c.passed ? "" : "failed";
+      li.title = `${c.name}: ${c.detail}`;
+      li.dataset.check = c.name;
+      li.innerHTML = `<span></span><span></span><span class="scores"></span>`;
+      li.children[0].className = c.passed ? "pass" : "fail";
+      li.children[0].textContent = c.passed ? "✓" : "✗";
+      li.children[1].textContent = c.label;
+      const sign = BOUND_SIGN[c.bound] || "/";
+      li.children[2].textContent = `${Number(c.value).toPrecision(3)} ${sign} ${Number(c.limit).toPrecision(3)} ${c.unit}`;
+      li.children[2].title = `must be ${c.bound} ${c.limit} ${c.unit}`;
+      list.appendChild(li);
+    }
+  }
 }
 
 // ---- explore ---------------------------------------------------------------
@@ -755,7 +792,7 @@ function listenForEvents() {
   const events = new EventSource("/api/events");
   events.onmessage = (message) => {
     const e = JSON.parse(message.data);
-    if (e.kind === "start") { $("write-error").textContent = ""; $("written").textContent = ""; $("casting").textContent = ""; $("write-stage").textContent = `writing the ${e.what}…`; }
+    if (e.kind === "start") { studio.writingRevision = e.revision; $("write-error").textContent = ""; $("written").textContent = ""; $("casting").textContent = ""; $("write-stage").textContent = `writing the ${e.what}…`; }
     if (e.kind === "stage") { stageTotal = Math.max(1, e.total); stageDone = 0; $("write-stage").textContent = e.name; $("write-progress").max = stageTotal; $("write-progress").value = 0; }
     if (e.kind === "tick") { stageDone += e.n; $("write-progress").value = stageDone; }
     if (e.kind === "done") {
@@ -768,6 +805,9 @@ function listenForEvents() {
       if (e.casting) $("casting").textContent = e.casting.replace(/^casting: /, "To cast: ");
       setButtons(false);
       if (e.what === "mold") loadReport();
+      // the run keeps its spec as spec.toml: where that is the spec file
+      // (the built-in design's), the write saved it
+      if (e.written.includes($("spec-file").textContent) && studio.writingRevision === studio.revision) { studio.savedText = studio.text; showSaved(); }
     }
     if (e.kind === "error") { $("write-stage").textContent = "failed"; $("write-error").textContent = e.message; setButtons(false); }
   };

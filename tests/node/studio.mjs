@@ -14,9 +14,10 @@
 // saved keeps the spec's comments and changes only its line; a formula
 // surface takes its kind and z together (z shows once the kind is
 // formula; only the keys that apply show); undo and redo step through the
-// revisions, with an unsaved mark; Save as and Open; scoring the explore grid shows its
+// revisions, with an unsaved mark; Save as and Open; the checks are
+// grouped by part, labelled, and a failed one cannot be missed; scoring the explore grid shows its
 // progress and can be cancelled; the grid marks the current design's cell, and goes stale when the design changes; at 390 px the
-// page scrolls only down; a dropped PNG becomes the profile. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
+// page scrolls only down; at 1920 px the moiré grows past 512 px; a dropped PNG becomes the profile. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
 
 import { existsSync, readFileSync } from "node:fs";
 import { join } from "node:path";
@@ -161,6 +162,41 @@ try {
   check(reset[0] === 0.6 && reset[1] === 0.7 && Math.abs(reset[2] - 3) < 1e-12,
     `"Reset view" brings back the first view (yaw ${reset[0]}, pitch ${reset[1]}, distance ${reset[2]} radii)`);
 
+  // readable checks: grouped by part (the mold's once it is built), each
+  // with its registry label and its limit as a maximum or a minimum
+  await page.locator("#show-mold").click();
+  await page.waitForFunction(() => [...document.querySelectorAll("#check-list li.part")].some((li) => li.textContent.startsWith("Cavity")), null, { timeout: 120000 });
+  const readable = await page.evaluate(() => ({
+    parts: [...document.querySelectorAll("#check-list li.part")].map((li) => li.textContent.split(":")[0].toLowerCase()),
+    thickness: [...document.querySelectorAll('#check-list li[data-check="min-thickness"] span')].map((e) => e.textContent),
+    surface: [...document.querySelectorAll('#check-list li[data-check="surface-to-mesh"] span')].map((e) => e.textContent),
+  }));
+  check(JSON.stringify(readable.parts) === JSON.stringify(["device", "mold top", "mold bottom", "mold", "cavity"])
+    && readable.thickness[1] === "Thickness" && readable.thickness[2].includes(" ≥ ")
+    && readable.surface[1] === "Mesh within tolerance" && readable.surface[2].includes(" ≤ "),
+    `checks are grouped by part (${readable.parts.join(", ")}), labelled, with ≤ for a maximum and ≥ for a minimum: ${JSON.stringify([readable.thickness, readable.surface])}`);
+  // a failed check cannot be missed (a failure injected into the report)
+  await page.route("**/api/report", async (route) => {
+    const report = await (await route.fetch()).json();
+    const c = report.checks.find((c) => c.name === "min-thickness");
+    c.passed = false; c.value = 0.001;
+    await route.fulfill({ json: report });
+  });
+  await page.evaluate(() => loadReport());
+  await page.waitForFunction(() => !document.getElementById("checks-failed").hidden, null, { timeout: 60000 });
+  const failure = await page.evaluate(() => ({
+    banner: document.getElementById("checks-failed").textContent,
+    header: document.getElementById("header-failed").hidden ? "" : document.getElementById("header-failed").textContent,
+    red: document.getElementById("checks").classList.contains("failed"),
+    row: document.querySelector('#check-list li[data-check="min-thickness"]').className,
+  }));
+  await page.unroute("**/api/report");
+  check(failure.banner === "✗ 1 check failed: Thickness (device)" && failure.header === "✗ 1 failed check" && failure.red && failure.row === "failed",
+    `a failed check is named in a banner and in the header, and marked red: ${JSON.stringify(failure)}`);
+  await page.locator("#show-device").click();
+  await page.evaluate(() => loadReport());
+  await page.waitForFunction(() => document.getElementById("checks-failed").hidden, null, { timeout: 60000 });
+
   // "Write device files" writes device.stl
   await page.locator("#write-device").click();
   await page.waitForFunction(() => document.getElementById("written").textContent.includes("device.stl"), null, { timeout: 120000 });
@@ -304,6 +340,13 @@ try {
   const narrow = screenshot.replace(/\.png$/, "-390.png");
   await phone.screenshot({ path: narrow, fullPage: false });
   console.log(`screenshot: ${narrow}`);
+
+  // a wide screen: the moiré grows beyond 512 px, sharper at rest
+  const wide = await browser.newPage({ viewport: { width: 1920, height: 1080 } });
+  await wide.goto(url);
+  await wide.waitForFunction(() => window.studio && window.studio.frames >= 1 && document.getElementById("frame").naturalWidth > 256, null, { timeout: 60000 });
+  const big = await wide.evaluate(() => ({ shown: document.getElementById("frame").getBoundingClientRect().width, pixels: document.getElementById("frame").naturalWidth, scroll: document.documentElement.scrollWidth <= document.documentElement.clientWidth }));
+  check(big.shown > 600 && big.pixels >= 512 && big.scroll, `at 1920 px the moiré is ${big.shown.toFixed(0)} px wide, from a ${big.pixels} px frame, with no sideways scrolling`);
 } catch (e) {
   check(false, String(e));
 } finally {

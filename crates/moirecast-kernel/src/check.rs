@@ -20,6 +20,12 @@ pub struct CheckResult {
 }
 
 impl CheckResult {
+    /// Whether `name` is in the registry with this unit and bound
+    /// ([`crate::checks`]): checked in debug builds, where every test runs.
+    fn registered(name: &str, unit: &str, bound: crate::checks::Bound) -> bool {
+        crate::checks::check_doc(name).is_some_and(|d| d.unit == unit && d.bound == bound)
+    }
+
     pub fn at_most(
         name: &'static str,
         value: f64,
@@ -27,6 +33,10 @@ impl CheckResult {
         unit: &'static str,
         detail: String,
     ) -> Self {
+        debug_assert!(
+            Self::registered(name, unit, crate::checks::Bound::AtMost),
+            "check `{name}` ({unit}, at most) is not in the registry"
+        );
         CheckResult {
             name,
             value,
@@ -43,6 +53,10 @@ impl CheckResult {
         unit: &'static str,
         detail: String,
     ) -> Self {
+        debug_assert!(
+            Self::registered(name, unit, crate::checks::Bound::AtLeast),
+            "check `{name}` ({unit}, at least) is not in the registry"
+        );
         CheckResult {
             name,
             value,

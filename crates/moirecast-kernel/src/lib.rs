@@ -28,6 +28,7 @@
 //! ```
 
 pub mod check;
+pub mod checks;
 pub mod design;
 pub mod device_mesh;
 pub mod error;

@@ -605,6 +605,31 @@ pub struct Spec {
     /// The `[mold]` table, range-checked; fits to the device are checked
     /// when the mold is built.
     pub mold: MoldParams,
+    /// The spec's text and the image it read: a run's folder keeps them, so
+    /// that it can be rebuilt.
+    pub source: SpecSource,
+}
+
+/// The text a spec was parsed from, and the profile image it read (as the
+/// spec names it, and its bytes).
+pub struct SpecSource {
+    pub text: String,
+    pub image: ReadImage,
+}
+
+impl std::fmt::Debug for SpecSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SpecSource")
+            .field("text", &format_args!("{} bytes", self.text.len()))
+            .field(
+                "image",
+                &self
+                    .image
+                    .as_ref()
+                    .map(|(n, b)| format!("{n}: {} bytes", b.len())),
+            )
+            .finish()
+    }
 }
 
 /// Loads the spec at `path`; images resolve relative to its directory.
@@ -728,7 +753,7 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         }
         None => 0.0,
     };
-    let (profile, profile_source) = profile(file, &raw.profile, (w, h, reach), &images)?;
+    let (profile, profile_source, image) = profile(file, &raw.profile, (w, h, reach), &images)?;
     params.profile = profile;
     let design = Design::new(params).map_err(|e| from_design_error(file, e))?;
     let mold = raw.mold.params();
@@ -749,6 +774,10 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         design,
         origin: file.to_owned(),
         profile_source,
+        source: SpecSource {
+            text: text.to_owned(),
+            image,
+        },
         material: raw.lens.material.clone(),
         cast_material: cast_material(&raw.lens, index),
     })
@@ -877,14 +906,17 @@ fn base_d(file: &str, d: &Distance) -> Result<Option<f64>, SpecError> {
     })
 }
 
-/// The elevation profile of `[profile]` on a layout of `w` × `h` mm, and
-/// how the report names its source.
+/// An image the spec read: its name as the spec gives it, and its bytes.
+type ReadImage = Option<(String, Vec<u8>)>;
+
+/// The elevation profile of `[profile]` on a layout of `w` × `h` mm, how
+/// the report names its source, and the image it read.
 fn profile(
     file: &str,
     p: &ProfileTable,
     (w, h, reach): (f64, f64, f64),
     images: &ImageSource,
-) -> Result<(Profile, String), SpecError> {
+) -> Result<(Profile, String, ReadImage), SpecError> {
     let blur = finite(file, "profile.blur", p.blur)?;
     if !(BLUR_MM.0..=BLUR_MM.1).contains(&blur) {
         return Err(invalid(
@@ -931,7 +963,8 @@ fn profile(
         }
         Ok(v)
     };
-    Ok(match kind {
+    let mut image = None;
+    let (profile, source) = match kind {
         ProfileKind::Flat => (Profile::Flat, "flat".to_string()),
         ProfileKind::Rings => {
             let wl = positive("profile.wavelength", p.wavelength.unwrap_or(w.min(h) / 4.0))?;
@@ -960,7 +993,8 @@ fn profile(
                     "0.5 splits dark from light",
                 ));
             }
-            let raster = read_raster(file, &name, images)?;
+            let (raster, bytes) = read_raster(file, &name, images)?;
+            image = Some((name.clone(), bytes));
             let mode = match p.mode {
                 ModeKey::Gray => ProfileMode::Gray,
                 ModeKey::Shape => ProfileMode::Shape { threshold },
@@ -989,11 +1023,17 @@ fn profile(
                 format!("{name} ({:?}, blur {blur} mm)", p.mode).to_lowercase(),
             )
         }
-    })
+    };
+    Ok((profile, source, image))
 }
 
-/// Reads an image as luminance composited over white.
-fn read_raster(file: &str, name: &str, images: &ImageSource) -> Result<Raster, SpecError> {
+/// Reads an image as luminance composited over white, with the file's
+/// bytes (which the run's folder keeps beside its spec).
+fn read_raster(
+    file: &str,
+    name: &str,
+    images: &ImageSource,
+) -> Result<(Raster, Vec<u8>), SpecError> {
     let bytes = match images {
         ImageSource::Dir(dir) => {
             let path = dir.join(name);
@@ -1036,11 +1076,14 @@ fn read_raster(file: &str, name: &str, images: &ImageSource) -> Result<Raster, S
         .pixels()
         .map(|p| p.0[1] * p.0[0] + (1.0 - p.0[1]))
         .collect();
-    Ok(Raster {
-        width,
-        height,
-        luminance,
-    })
+    Ok((
+        Raster {
+            width,
+            height,
+            luminance,
+        },
+        bytes,
+    ))
 }
 
 #[cfg(test)]
