@@ -368,10 +368,15 @@ function showFrameState() {
 }
 
 // A frame of 256 px while a slider moves; at rest, as many pixels as the
-// frame shows (a wide screen's), up to 512.
+// frame shows (a wide screen's), up to 512, where the frame is traced
+// through the exact sections (a dual-lens device seen orthographically);
+// through the mesh, slower, 256.
 function frameSize(samples) {
   const shown = $("frame").getBoundingClientRect().width * (window.devicePixelRatio || 1);
-  return String(samples >= 4 && shown > 320 ? Math.min(512, Math.ceil(shown / 64) * 64) : 256);
+  const printed = (fieldValue("base.kind") || "dual-lens") !== "dual-lens";
+  const distance = fieldValue("view.distance");
+  const sections = !printed && (distance === undefined || distance === "infinite");
+  return String(sections && samples >= 4 && shown > 320 ? Math.min(512, Math.ceil(shown / 64) * 64) : 256);
 }
 
 async function requestFrame(samples = 4) {
