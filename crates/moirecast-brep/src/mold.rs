@@ -282,7 +282,7 @@ pub fn half_brep(
         .collect();
     // the half keeps the device's vertices where they were, to the bit
     let key = |p: DVec3| p.to_array().map(|c| (c + 0.0).to_bits());
-    let posed_at: HashMap<[u64; 3], u32> = posed
+    let posed_at: rustc_hash::FxHashMap<[u64; 3], u32> = posed
         .mesh
         .positions
         .iter()

@@ -941,7 +941,7 @@ impl<'a> HeightQuery<'a> {
 #[derive(Default)]
 pub struct SolidBuilder {
     pub mesh: Mesh,
-    index: HashMap<[u64; 3], u32>,
+    index: rustc_hash::FxHashMap<[u64; 3], u32>,
     /// The surface the triangles added next lie on.
     pub surface: RegionSurface,
     /// Per triangle, the surface it lies on.

@@ -21,7 +21,7 @@ use glam::{DVec2, DVec3};
 use manifold_rust::linalg::Vec2;
 use moirecast_kernel::Mesh;
 use rayon::prelude::*;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 
 /// Clearance (mm) in xy between the far patch and the channels' bounding
 /// boxes, and between the patch and the outline (the walls).
@@ -290,7 +290,7 @@ impl Split {
             mut source,
         } = cut;
         let key = |p: DVec3| p.to_array().map(|c| (c + 0.0).to_bits());
-        let rim_at: HashMap<[u64; 3], u32> = self
+        let rim_at: rustc_hash::FxHashMap<[u64; 3], u32> = self
             .rim
             .iter()
             .map(|&v| (key(region.mesh.positions[v as usize]), v))
