@@ -1,6 +1,7 @@
 //! Named checks of METHOD §7.1, each carrying its evidence: what was
 //! measured, the limit, and where the worst case is.
 
+use crate::checks::Bound;
 use crate::mesh::Mesh;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -20,12 +21,33 @@ pub struct CheckResult {
 }
 
 impl CheckResult {
-    /// Whether `name` is in the registry with this unit and bound
-    /// ([`crate::checks`]): checked in debug builds, where every test runs.
-    fn registered(name: &str, unit: &str, bound: crate::checks::Bound) -> bool {
-        crate::checks::check_doc(name).is_some_and(|d| d.unit == unit && d.bound == bound)
+    /// `value` held against `limit` by `bound`. The name must be in the
+    /// registry ([`crate::checks`]) with this unit and bound: checked in
+    /// debug builds, where every test runs.
+    pub fn bounded(
+        name: &'static str,
+        value: f64,
+        bound: Bound,
+        limit: f64,
+        unit: &'static str,
+        detail: String,
+    ) -> Self {
+        debug_assert!(
+            crate::checks::check_doc(name).is_some_and(|d| d.unit == unit && d.bound == bound),
+            "check `{name}` ({unit}, {}) is not in the registry",
+            bound.words()
+        );
+        CheckResult {
+            name,
+            value,
+            limit,
+            unit,
+            passed: bound.passes(value, limit),
+            detail,
+        }
     }
 
+    /// Passed when value ≤ limit.
     pub fn at_most(
         name: &'static str,
         value: f64,
@@ -33,19 +55,10 @@ impl CheckResult {
         unit: &'static str,
         detail: String,
     ) -> Self {
-        debug_assert!(
-            Self::registered(name, unit, crate::checks::Bound::AtMost),
-            "check `{name}` ({unit}, at most) is not in the registry"
-        );
-        CheckResult {
-            name,
-            value,
-            limit,
-            unit,
-            passed: value <= limit,
-            detail,
-        }
+        Self::bounded(name, value, Bound::AtMost, limit, unit, detail)
     }
+
+    /// Passed when value ≥ limit.
     pub fn at_least(
         name: &'static str,
         value: f64,
@@ -53,18 +66,7 @@ impl CheckResult {
         unit: &'static str,
         detail: String,
     ) -> Self {
-        debug_assert!(
-            Self::registered(name, unit, crate::checks::Bound::AtLeast),
-            "check `{name}` ({unit}, at least) is not in the registry"
-        );
-        CheckResult {
-            name,
-            value,
-            limit,
-            unit,
-            passed: value >= limit,
-            detail,
-        }
+        Self::bounded(name, value, Bound::AtLeast, limit, unit, detail)
     }
 }
 
@@ -181,36 +183,36 @@ fn solid_checks_and_volume(mesh: &Mesh, spec: SolidSpec) -> (Vec<CheckResult>, f
     ));
     // One shell, genus 0: connected, and V − E + F = 2.
     let euler = vertices as i64 - undirected as i64 + mesh.triangles.len() as i64;
-    out.push(CheckResult {
-        name: "shells",
-        value: shells as f64,
-        limit: spec.shells as f64,
-        unit: "shells",
-        passed: shells == spec.shells as usize,
-        detail: format!(
+    out.push(CheckResult::bounded(
+        "shells",
+        shells as f64,
+        Bound::Exactly,
+        spec.shells as f64,
+        "shells",
+        format!(
             "{shells} connected shells, {} unused vertices",
             mesh.positions.len() - vertices
         ),
-    });
+    ));
     // Summed over the shells: χ = Σ (2 − 2 g_i).
     let measured_genus = (2 * shells as i64 - euler) as f64 / 2.0;
-    out.push(CheckResult {
-        name: "genus",
-        value: measured_genus,
-        limit: genus as f64,
-        unit: "holes",
-        passed: measured_genus == genus as f64,
-        detail: format!("Euler characteristic {euler}"),
-    });
+    out.push(CheckResult::bounded(
+        "genus",
+        measured_genus,
+        Bound::Exactly,
+        genus as f64,
+        "holes",
+        format!("Euler characteristic {euler}"),
+    ));
 
-    out.push(CheckResult {
-        name: "positive-volume",
-        value: volume,
-        limit: 0.0,
-        unit: "mm³",
-        passed: volume > 0.0,
-        detail: String::new(),
-    });
+    out.push(CheckResult::bounded(
+        "positive-volume",
+        volume,
+        Bound::Above,
+        0.0,
+        "mm³",
+        String::new(),
+    ));
 
     let at = mesh
         .triangles

@@ -19,6 +19,16 @@ pub enum Bound {
 }
 
 impl Bound {
+    /// Whether `value` passes against `limit`.
+    pub fn passes(self, value: f64, limit: f64) -> bool {
+        match self {
+            Bound::AtMost => value <= limit,
+            Bound::AtLeast => value >= limit,
+            Bound::Exactly => value == limit,
+            Bound::Above => value > limit,
+        }
+    }
+
     /// The relation as a reader writes it between value and limit.
     pub fn symbol(self) -> &'static str {
         match self {
