@@ -361,33 +361,38 @@ pub(crate) fn commit_with_report(
 
 /// The run's own copy of the spec that made it, so that its folder can be
 /// rebuilt (`moirecast device DIR/spec.toml`): `spec.toml`, the exact text,
-/// and the profile image it read, at the path the spec names. An image
-/// named outside the folder (`..`, an absolute path) or by a run's own file
-/// name is kept as `profiles/NAME` instead, and only the copy's
-/// `profile.image` says so.
+/// and the images it read (a profile's, a height map's), at the paths the
+/// spec names. An image named outside the folder (`..`, an absolute path)
+/// or by a run's own file name is kept as `profiles/NAME` (a profile) or
+/// `surfaces/NAME` (a height map) instead, and only the copy's key says so.
 fn add_spec(files: &mut OutputSet, source: &moirecast_spec::SpecSource) -> Result<()> {
     use moirecast_spec::{EditValue, SpecEdit};
     use std::path::Component;
     let mut text = source.text.clone();
-    if let Some((name, bytes)) = &source.image {
-        let path = Path::new(name);
+    for image in &source.images {
+        let (name, path) = (&image.name, Path::new(&image.name));
         let taken = files.sizes().iter().any(|(n, _)| n == name) || name == "spec.toml";
         let inside = path.components().all(|c| matches!(c, Component::Normal(_)));
         let kept = if inside && !taken {
             name.clone()
         } else {
+            let folder = if image.key == "surface.image" {
+                "surfaces"
+            } else {
+                "profiles"
+            };
             let file = path
                 .file_name()
-                .map_or("profile.png".into(), |f| f.to_string_lossy());
-            let kept = format!("profiles/{file}");
+                .map_or("image.png".into(), |f| f.to_string_lossy());
+            let kept = format!("{folder}/{file}");
             let edit = SpecEdit {
-                key: "profile.image".into(),
+                key: image.key.into(),
                 value: Some(EditValue::Text(kept.clone())),
             };
             text = moirecast_spec::apply_edits(&text, &[edit])?;
             kept
         };
-        files.add(&kept, bytes.clone());
+        files.add(&kept, image.bytes.clone());
     }
     files.add("spec.toml", text.into_bytes());
     Ok(())

@@ -47,11 +47,25 @@ impl FileReport {
     }
 }
 
+/// How a height map was fitted: its extent, its samples and their
+/// spacing, the smoothing, and the fit's largest deviation from its
+/// samples.
+#[derive(Serialize)]
+pub struct HeightMapEcho {
+    pub extent_mm: [f64; 2],
+    pub spacing_mm: [f64; 2],
+    pub smoothing_mm: f64,
+    pub max_deviation_mm: f64,
+}
+
 #[derive(Serialize)]
 pub struct DesignEcho {
     pub surface: &'static str,
     pub surface_radius_mm: Option<f64>,
     pub surface_formula: Option<String>,
+    /// A height map's fit (kind = "heightmap" only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub surface_heightmap: Option<HeightMapEcho>,
     pub width_mm: f64,
     pub height_mm: f64,
     pub period_mm: f64,
@@ -301,11 +315,22 @@ pub fn design_echo(spec: &Spec) -> DesignEcho {
         | PitchSurface::Cylinder { radius }
         | PitchSurface::Sphere { radius } => (Some(*radius), None),
         PitchSurface::Formula(f) => (None, Some(f.source.clone())),
+        PitchSurface::HeightMap(_) => (None, None),
+    };
+    let heightmap = match &p.surface {
+        PitchSurface::HeightMap(m) => Some(HeightMapEcho {
+            extent_mm: [m.extent().0, m.extent().1],
+            spacing_mm: [m.spacing().0, m.spacing().1],
+            smoothing_mm: m.smoothing(),
+            max_deviation_mm: m.max_deviation(),
+        }),
+        _ => None,
     };
     DesignEcho {
         surface: p.surface.kind(),
         surface_radius_mm: radius,
         surface_formula: formula,
+        surface_heightmap: heightmap,
         width_mm: p.width,
         height_mm: p.height,
         period_mm: p.period,

@@ -324,6 +324,18 @@ fn traversal_foreign_hosts_and_large_bodies_are_refused() {
         assert_eq!(r.status, 422, "{image}");
         assert_eq!(r.json()["errors"][0]["key"], "profile.image", "{image}");
     }
+    // and a height map's, the same
+    for image in ["../profiles/horse.png", "/etc/hosts.png"] {
+        let text = SMALL.replace(
+            "[surface]\nkind = \"saddle\"\nradius = 40.0",
+            &format!(
+                "[surface]\nkind = \"heightmap\"\nimage = {image:?}\nz_min = 0.0\nz_max = 1.0"
+            ),
+        );
+        let r = studio.request("PUT", "/api/spec", text.as_bytes());
+        assert_eq!(r.status, 422, "{image}");
+        assert_eq!(r.json()["errors"][0]["key"], "surface.image", "{image}");
+    }
     // an image inside the spec's folder is fine
     let text = SMALL.replace(
         "[profile]\nkind = \"bump\"\nsigma = 1.5",

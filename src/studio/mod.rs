@@ -243,28 +243,32 @@ impl Studio {
     }
 
     /// Parses and validates `text` as the command line would, and refuses
-    /// profile images outside the spec's folder.
+    /// images (a profile's, a height map's) outside the spec's folder.
     fn parse(&self, text: &str) -> Result<Spec, Vec<serde_json::Value>> {
         self.parse_at(&self.home(), text)
     }
 
     /// [`parse`](Self::parse) for a spec that lives at `home`.
     fn parse_at(&self, home: &Home, text: &str) -> Result<Spec, Vec<serde_json::Value>> {
-        if let Some(image) = toml::from_str::<toml::Table>(text)
-            .ok()
-            .and_then(|t| t.get("profile")?.get("image")?.as_str().map(str::to_owned))
-        {
+        let table = toml::from_str::<toml::Table>(text).ok();
+        for (table_name, key) in [("profile", "profile.image"), ("surface", "surface.image")] {
+            let Some(image) = table
+                .as_ref()
+                .and_then(|t| t.get(table_name)?.get("image")?.as_str().map(str::to_owned))
+            else {
+                continue;
+            };
             let inside = match home {
                 Home::File { dir, .. } => is_inside(dir, Path::new(&image)),
                 Home::Embedded => is_plain_relative(Path::new(&image)),
             };
             if !inside {
                 return Err(vec![json!({
-                    "key": "profile.image",
+                    "key": key,
                     "value": format!("{image:?}"),
                     "message": "is not an image file inside the spec's folder (the studio reads no other)",
                     "fix": "pick an image from the list, or give a path relative to the spec's folder without `..`",
-                    "cli": format!("error: spec `{}`: `profile.image` = {image:?}: is not an image file inside the spec's folder (the studio reads no other).\n  Fix: pick an image from the list, or give a path relative to the spec's folder without `..`", home.file_name()),
+                    "cli": format!("error: spec `{}`: `{key}` = {image:?}: is not an image file inside the spec's folder (the studio reads no other).\n  Fix: pick an image from the list, or give a path relative to the spec's folder without `..`", home.file_name()),
                 })]);
             }
         }

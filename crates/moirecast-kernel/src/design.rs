@@ -600,7 +600,7 @@ impl Design {
             ));
         }
         match &p.surface {
-            PitchSurface::Plane | PitchSurface::Formula(_) => {}
+            PitchSurface::Plane | PitchSurface::Formula(_) | PitchSurface::HeightMap(_) => {}
             PitchSurface::Saddle { radius: r }
             | PitchSurface::Paraboloid { radius: r }
             | PitchSurface::Cylinder { radius: r }
@@ -770,14 +770,22 @@ impl Design {
         use limits::*;
         let radius_param = match self.surface() {
             PitchSurface::Formula(_) => Param::SurfaceFormula,
+            PitchSurface::HeightMap(_) => Param::SurfaceHeightMap,
             _ => Param::SurfaceRadius,
         };
+        let gentler = self.surface().gentler();
         let radius_value = match self.surface() {
             PitchSurface::Saddle { radius }
             | PitchSurface::Paraboloid { radius }
             | PitchSurface::Cylinder { radius }
             | PitchSurface::Sphere { radius } => radius.to_string(),
             PitchSurface::Formula(f) => f.source.clone(),
+            PitchSurface::HeightMap(m) => format!(
+                "a height map over {} × {} mm, smoothing {} mm",
+                m.extent().0,
+                m.extent().1,
+                m.smoothing()
+            ),
             PitchSurface::Plane => "plane".into(),
         };
         let (mut kmax, mut smax, mut dmax, mut fold_at) = (0.0f64, 0.0f64, 0.0f64, DVec2::ZERO);
@@ -796,7 +804,7 @@ impl Design {
                     radius_param,
                     radius_value,
                     format!("the surface is not defined at layout point ({:.2}, {:.2}) mm (the layout plus a {:.2} mm margin for the base)", q.x, q.y, self.margin),
-                    "use a larger radius or a smaller layout",
+                    format!("{gentler}, or a smaller layout"),
                 ));
             }
             if self.surface().x_of_u(q.x + 1e-6) <= self.surface().x_of_u(q.x - 1e-6) {
@@ -804,7 +812,7 @@ impl Design {
                     radius_param,
                     radius_value,
                     "the surface folds back over itself in x",
-                    "use a larger radius or a smaller width",
+                    format!("{gentler}, or a smaller width"),
                 ));
             }
             let slope = n.z.clamp(-1.0, 1.0).acos();
@@ -884,7 +892,7 @@ impl Design {
                     smax.to_degrees(),
                     self.params.lens.afov.max(base_afov).to_degrees() / 2.0
                 ),
-                "use a larger radius, a smaller layout or a smaller AFOV",
+                format!("{gentler}, a smaller layout or a smaller AFOV"),
             ));
         }
         self.validate_base_flank(steepest_base, base_afov)?;

@@ -8,6 +8,7 @@ use thiserror::Error;
 pub enum Param {
     SurfaceRadius,
     SurfaceFormula,
+    SurfaceHeightMap,
     Width,
     Height,
     Period,
@@ -33,9 +34,10 @@ pub enum Param {
 
 impl Param {
     /// Every parameter, for exhaustive mappings and their tests.
-    pub const ALL: [Param; 23] = [
+    pub const ALL: [Param; 24] = [
         Param::SurfaceRadius,
         Param::SurfaceFormula,
+        Param::SurfaceHeightMap,
         Param::Width,
         Param::Height,
         Param::Period,

@@ -34,6 +34,7 @@ pub mod device_mesh;
 pub mod error;
 pub mod formula;
 pub mod grid;
+pub mod heightmap;
 pub mod lens;
 pub mod measure;
 pub mod mesh;

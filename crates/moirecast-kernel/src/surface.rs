@@ -9,6 +9,7 @@
 //! `formula`.
 
 use crate::formula::{self, FormulaError};
+use crate::heightmap::HeightMap;
 use exmex::prelude::*;
 use glam::DVec3;
 use std::sync::Arc;
@@ -193,11 +194,21 @@ impl FormulaSurface {
 #[derive(Clone, Debug)]
 pub enum PitchSurface {
     Plane,
-    Saddle { radius: f64 },
-    Paraboloid { radius: f64 },
-    Cylinder { radius: f64 },
-    Sphere { radius: f64 },
+    Saddle {
+        radius: f64,
+    },
+    Paraboloid {
+        radius: f64,
+    },
+    Cylinder {
+        radius: f64,
+    },
+    Sphere {
+        radius: f64,
+    },
     Formula(FormulaSurface),
+    /// A height map's smoothing spline ([`crate::heightmap`]), shared.
+    HeightMap(std::sync::Arc<HeightMap>),
 }
 
 impl PitchSurface {
@@ -245,6 +256,7 @@ impl PitchSurface {
                 ]
             }
             PitchSurface::Formula(f) => f.eval(x, y),
+            PitchSurface::HeightMap(m) => m.eval(x, y),
             PitchSurface::Cylinder { .. } => unreachable!("cylinder is not a graph in this form"),
         }
     }
@@ -258,6 +270,7 @@ impl PitchSurface {
             }
             PitchSurface::Plane => DVec3::new(u, v, 0.0),
             PitchSurface::Formula(f) => DVec3::new(u, v, f.value(u, v)),
+            PitchSurface::HeightMap(m) => DVec3::new(u, v, m.value(u, v)),
             _ => DVec3::new(u, v, self.height(u, v)[0]),
         }
     }
@@ -333,6 +346,17 @@ impl PitchSurface {
         }
     }
 
+    /// How to make this surface curve or slope less, as a fix says it.
+    pub fn gentler(&self) -> &'static str {
+        match self {
+            PitchSurface::Formula(_) => "make surface.z gentler",
+            PitchSurface::HeightMap(_) => {
+                "lower surface.z_max − surface.z_min, or raise surface.smoothing"
+            }
+            _ => "use a larger radius",
+        }
+    }
+
     /// A short name for reports.
     pub fn kind(&self) -> &'static str {
         match self {
@@ -342,6 +366,7 @@ impl PitchSurface {
             PitchSurface::Cylinder { .. } => "cylinder",
             PitchSurface::Sphere { .. } => "sphere",
             PitchSurface::Formula(_) => "formula",
+            PitchSurface::HeightMap(_) => "heightmap",
         }
     }
 }

@@ -22,8 +22,10 @@
 //! ```
 
 use moirecast_kernel::{
-    profile::SampledProfile, BaseParams, Design, DesignError, DesignParams, LensParams, LensRule,
-    Param, PitchSurface, PrintedBase, Profile, ProfileMode, Raster,
+    heightmap::{HeightMap, HeightSamples},
+    profile::SampledProfile,
+    BaseParams, Design, DesignError, DesignParams, LensParams, LensRule, Param, PitchSurface,
+    PrintedBase, Profile, ProfileMode, Raster,
 };
 use moirecast_mold::{MoldError, MoldParam, MoldParams};
 use serde::{Deserialize, Serialize};
@@ -89,6 +91,7 @@ pub fn key_of(p: Param) -> &'static str {
     match p {
         Param::SurfaceRadius => "surface.radius",
         Param::SurfaceFormula => "surface.z",
+        Param::SurfaceHeightMap => "surface.image",
         Param::Width => "layout.width",
         Param::Height => "layout.height",
         Param::Period => "layout.period",
@@ -179,6 +182,7 @@ enum SurfaceKind {
     Cylinder,
     Sphere,
     Formula,
+    Heightmap,
 }
 
 #[derive(Deserialize, Serialize, Debug)]
@@ -187,6 +191,11 @@ struct SurfaceTable {
     kind: SurfaceKind,
     radius: f64,
     z: Option<String>,
+    image: Option<String>,
+    z_min: Option<f64>,
+    z_max: Option<f64>,
+    size: Option<[f64; 2]>,
+    smoothing: Option<f64>,
 }
 impl Default for SurfaceTable {
     fn default() -> Self {
@@ -194,6 +203,11 @@ impl Default for SurfaceTable {
             kind: SurfaceKind::Saddle,
             radius: 60.0,
             z: None,
+            image: None,
+            z_min: None,
+            z_max: None,
+            size: None,
+            smoothing: None,
         }
     }
 }
@@ -610,24 +624,31 @@ pub struct Spec {
     pub source: SpecSource,
 }
 
-/// The text a spec was parsed from, and the profile image it read (as the
-/// spec names it, and its bytes).
+/// The text a spec was parsed from, and the images it read.
 pub struct SpecSource {
     pub text: String,
-    pub image: ReadImage,
+    pub images: Vec<SpecImage>,
+}
+
+/// An image a spec read: the key that names it, its name as the spec
+/// gives it, and its bytes.
+pub struct SpecImage {
+    /// `profile.image` or `surface.image`.
+    pub key: &'static str,
+    pub name: String,
+    pub bytes: Vec<u8>,
 }
 
 impl std::fmt::Debug for SpecSource {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let images: Vec<String> = self
+            .images
+            .iter()
+            .map(|i| format!("{} = {}: {} bytes", i.key, i.name, i.bytes.len()))
+            .collect();
         f.debug_struct("SpecSource")
             .field("text", &format_args!("{} bytes", self.text.len()))
-            .field(
-                "image",
-                &self
-                    .image
-                    .as_ref()
-                    .map(|(n, b)| format!("{n}: {} bytes", b.len())),
-            )
+            .field("images", &images)
             .finish()
     }
 }
@@ -699,7 +720,12 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         file: file.to_owned(),
         message: e.to_string().trim_end().to_owned(),
     })?;
-    let surface = surface(file, &raw.surface)?;
+    let layout = &raw.layout;
+    let (w, h) = (
+        finite(file, "layout.width", layout.width)?,
+        finite(file, "layout.height", layout.height)?,
+    );
+    let (surface, surface_image) = surface(file, &raw.surface, (w, h), &images)?;
     let index = lens_index(file, &raw.lens)?;
     let base_kind = base_kind(file, &raw.base)?;
     let d = base_d(file, &raw.base.d)?;
@@ -709,11 +735,6 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         .afov
         .map(|a| finite(file, "base.afov", a).map(f64::to_radians))
         .transpose()?;
-    let layout = &raw.layout;
-    let (w, h) = (
-        finite(file, "layout.width", layout.width)?,
-        finite(file, "layout.height", layout.height)?,
-    );
     let mut params = DesignParams {
         surface,
         width: w,
@@ -776,16 +797,57 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         profile_source,
         source: SpecSource {
             text: text.to_owned(),
-            image,
+            images: [image, surface_image].into_iter().flatten().collect(),
         },
         material: raw.lens.material.clone(),
         cast_material: cast_material(&raw.lens, index),
     })
 }
 
-/// The pitch surface of `[surface]`.
-fn surface(file: &str, s: &SurfaceTable) -> Result<PitchSurface, SpecError> {
+/// The pitch surface of `[surface]` over a layout of `w` × `h` mm, and
+/// the image it read (a height map's).
+fn surface(
+    file: &str,
+    s: &SurfaceTable,
+    (w, h): (f64, f64),
+    images: &ImageSource,
+) -> Result<(PitchSurface, ReadImage), SpecError> {
     let radius = finite(file, "surface.radius", s.radius)?;
+    only_with_kind(file, s)?;
+    let surface =
+        match s.kind {
+            SurfaceKind::Plane => PitchSurface::Plane,
+            SurfaceKind::Saddle => PitchSurface::Saddle { radius },
+            SurfaceKind::Paraboloid => PitchSurface::Paraboloid { radius },
+            SurfaceKind::Cylinder => PitchSurface::Cylinder { radius },
+            SurfaceKind::Sphere => PitchSurface::Sphere { radius },
+            SurfaceKind::Formula => {
+                let z = s.z.as_deref().ok_or_else(|| {
+                    invalid(
+                        file,
+                        "surface.z",
+                        "(missing)",
+                        "kind = \"formula\" needs z = h(x, y), in mm",
+                        "add e.g. z = \"(x*x - y*y)/120\"",
+                    )
+                })?;
+                PitchSurface::Formula(moirecast_kernel::surface::FormulaSurface::parse(z).map_err(
+                    |e| invalid(file, "surface.z", format!("{z:?}"), e.to_string(), e.fix),
+                )?)
+            }
+            SurfaceKind::Heightmap => {
+                let (map, image) = height_map(file, s, (w, h), images)?;
+                return Ok((
+                    PitchSurface::HeightMap(std::sync::Arc::new(map)),
+                    Some(image),
+                ));
+            }
+        };
+    Ok((surface, None))
+}
+
+/// Refuses `[surface]` keys that the chosen kind does not use.
+fn only_with_kind(file: &str, s: &SurfaceTable) -> Result<(), SpecError> {
     if s.z.is_some() && s.kind != SurfaceKind::Formula {
         return Err(invalid(
             file,
@@ -795,28 +857,158 @@ fn surface(file: &str, s: &SurfaceTable) -> Result<PitchSurface, SpecError> {
             "set surface.kind = \"formula\" or remove surface.z",
         ));
     }
-    Ok(match s.kind {
-        SurfaceKind::Plane => PitchSurface::Plane,
-        SurfaceKind::Saddle => PitchSurface::Saddle { radius },
-        SurfaceKind::Paraboloid => PitchSurface::Paraboloid { radius },
-        SurfaceKind::Cylinder => PitchSurface::Cylinder { radius },
-        SurfaceKind::Sphere => PitchSurface::Sphere { radius },
-        SurfaceKind::Formula => {
-            let z = s.z.as_deref().ok_or_else(|| {
-                invalid(
-                    file,
-                    "surface.z",
-                    "(missing)",
-                    "kind = \"formula\" needs z = h(x, y), in mm",
-                    "add e.g. z = \"(x*x - y*y)/120\"",
-                )
-            })?;
-            PitchSurface::Formula(
-                moirecast_kernel::surface::FormulaSurface::parse(z).map_err(|e| {
-                    invalid(file, "surface.z", format!("{z:?}"), e.to_string(), e.fix)
-                })?,
-            )
+    if s.kind != SurfaceKind::Heightmap {
+        let given = [
+            ("surface.image", s.image.is_some()),
+            ("surface.z_min", s.z_min.is_some()),
+            ("surface.z_max", s.z_max.is_some()),
+            ("surface.size", s.size.is_some()),
+            ("surface.smoothing", s.smoothing.is_some()),
+        ];
+        if let Some((key, _)) = given.iter().find(|(_, given)| *given) {
+            return Err(invalid(
+                file,
+                key,
+                "(given)",
+                "is only used with kind = \"heightmap\"",
+                format!("set surface.kind = \"heightmap\" or remove {key}"),
+            ));
         }
+    }
+    Ok(())
+}
+
+/// A height map's samples: the image `surface.image` names, black at
+/// `z_min` and white at `z_max`, over `size`, with its bit depth.
+struct HeightImage {
+    samples: HeightSamples,
+    bits: u8,
+    image: SpecImage,
+}
+
+/// The height map of a `kind = "heightmap"` surface over a layout of
+/// `w` × `h` mm, and the image it read.
+fn height_map(
+    file: &str,
+    s: &SurfaceTable,
+    (w, h): (f64, f64),
+    images: &ImageSource,
+) -> Result<(HeightMap, SpecImage), SpecError> {
+    let read = height_image(file, s, (w, h), images)?;
+    let (sx, sy) = read.samples.extent;
+    let spacing = (sx / read.samples.columns as f64).max(sy / read.samples.rows as f64);
+    // heights come in steps of the range over 255 or 65535: noise that an
+    // interpolating spline turns into curvature (0.018/mm at 16 bits and
+    // 0.25 mm spacing), so both are smoothed over a few pixels by default
+    let smoothing = match s.smoothing {
+        Some(v) => finite(file, "surface.smoothing", v)?,
+        None if read.bits <= 8 => HEIGHTMAP_SMOOTHING_PX.0 * spacing,
+        None => HEIGHTMAP_SMOOTHING_PX.1 * spacing,
+    };
+    if smoothing < 0.0 {
+        return Err(invalid(
+            file,
+            "surface.smoothing",
+            smoothing,
+            "must be zero or positive",
+            "0 interpolates the samples; the default is 8 pixels' spacing (24 for 8-bit images)",
+        ));
+    }
+    let map = HeightMap::fit(&read.samples, smoothing).map_err(|e| {
+        invalid(
+            file,
+            "surface.image",
+            format!("{:?}", read.image.name),
+            e.to_string(),
+            "use a greyscale PNG of at least 4 × 4 pixels",
+        )
+    })?;
+    Ok((map, read.image))
+}
+
+/// The default smoothing of a height map, in pixels' spacing: of an 8-bit
+/// image, and of a 16-bit one (heightmap.rs's
+/// `the_default_smoothing_quiets_quantised_heights`).
+pub const HEIGHTMAP_SMOOTHING_PX: (f64, f64) = (24.0, 8.0);
+
+/// Reads `surface.image` and its keys into height samples.
+fn height_image(
+    file: &str,
+    s: &SurfaceTable,
+    (w, h): (f64, f64),
+    images: &ImageSource,
+) -> Result<HeightImage, SpecError> {
+    let required = |key: &'static str, v: Option<f64>, example: &str| {
+        let v = v.ok_or_else(|| {
+            invalid(
+                file,
+                key,
+                "(missing)",
+                "kind = \"heightmap\" needs it, in mm",
+                format!("add e.g. {example}"),
+            )
+        })?;
+        finite(file, key, v)
+    };
+    let name = s.image.clone().ok_or_else(|| {
+        invalid(
+            file,
+            "surface.image",
+            "(missing)",
+            "kind = \"heightmap\" needs a greyscale PNG of heights",
+            "add image = \"surfaces/NAME.png\" (8 or 16 bit)",
+        )
+    })?;
+    let (z_min, z_max) = (
+        required("surface.z_min", s.z_min, "z_min = 0.0")?,
+        required("surface.z_max", s.z_max, "z_max = 3.0")?,
+    );
+    if z_max < z_min {
+        return Err(invalid(
+            file,
+            "surface.z_max",
+            z_max,
+            format!("is below surface.z_min ({z_min} mm)"),
+            "white is z_max and black z_min: give z_max ≥ z_min",
+        ));
+    }
+    let [sx, sy] = s.size.unwrap_or([w, h]);
+    let (sx, sy) = (
+        finite(file, "surface.size", sx)?,
+        finite(file, "surface.size", sy)?,
+    );
+    if sx < w || sy < h {
+        return Err(invalid(
+            file,
+            "surface.size",
+            format!("[{sx}, {sy}]"),
+            format!("must cover the layout ({w} × {h} mm): the height map is centred on it"),
+            format!("give size = [{w}, {h}] or larger"),
+        ));
+    }
+    let key = "surface.image";
+    let bytes = image_bytes(file, (key, &name), images)?;
+    let img = decode_image(file, (key, &name), &bytes)?;
+    let bits = if img.color().bits_per_pixel() / u16::from(img.color().channel_count()) > 8 {
+        16
+    } else {
+        8
+    };
+    let grey = img.to_luma16();
+    let (columns, rows) = (grey.width() as usize, grey.height() as usize);
+    let z = grey
+        .pixels()
+        .map(|p| z_min + (z_max - z_min) * f64::from(p.0[0]) / 65535.0)
+        .collect();
+    Ok(HeightImage {
+        samples: HeightSamples {
+            columns,
+            rows,
+            z,
+            extent: (sx, sy),
+        },
+        bits,
+        image: SpecImage { key, name, bytes },
     })
 }
 
@@ -906,8 +1098,8 @@ fn base_d(file: &str, d: &Distance) -> Result<Option<f64>, SpecError> {
     })
 }
 
-/// An image the spec read: its name as the spec gives it, and its bytes.
-type ReadImage = Option<(String, Vec<u8>)>;
+/// An image the spec read, if it read one.
+type ReadImage = Option<SpecImage>;
 
 /// The elevation profile of `[profile]` on a layout of `w` × `h` mm, how
 /// the report names its source, and the image it read.
@@ -994,7 +1186,11 @@ fn profile(
                 ));
             }
             let (raster, bytes) = read_raster(file, &name, images)?;
-            image = Some((name.clone(), bytes));
+            image = Some(SpecImage {
+                key: "profile.image",
+                name: name.clone(),
+                bytes,
+            });
             let mode = match p.mode {
                 ModeKey::Gray => ProfileMode::Gray,
                 ModeKey::Shape => ProfileMode::Shape { threshold },
@@ -1027,25 +1223,34 @@ fn profile(
     Ok((profile, source, image))
 }
 
-/// Reads an image as luminance composited over white, with the file's
-/// bytes (which the run's folder keeps beside its spec).
-fn read_raster(
+/// The most pixels an image in a spec may have (a profile's or a height
+/// map's): 4096 × 4096. Larger images, and files whose header claims more
+/// than this, are refused before they are decoded.
+pub const MAX_IMAGE_PIXELS: u64 = 4096 * 4096;
+
+/// The most memory (bytes) decoding one image may take: a 4096 × 4096
+/// image at 16 bits per channel, four channels, with room to spare.
+const MAX_IMAGE_ALLOC: u64 = 512 << 20;
+
+/// The bytes of the image `key` names: from the spec's folder, or
+/// embedded in the binary.
+fn image_bytes(
     file: &str,
-    name: &str,
+    (key, name): (&'static str, &str),
     images: &ImageSource,
-) -> Result<(Raster, Vec<u8>), SpecError> {
-    let bytes = match images {
+) -> Result<Vec<u8>, SpecError> {
+    match images {
         ImageSource::Dir(dir) => {
             let path = dir.join(name);
             std::fs::read(&path).map_err(|e| {
                 invalid(
                     file,
-                    "profile.image",
+                    key,
                     format!("{name:?}"),
                     format!("cannot read {}: {e}", path.display()),
                     "give a PNG path relative to the spec file",
                 )
-            })?
+            })
         }
         ImageSource::Embedded => EMBEDDED_IMAGES
             .iter()
@@ -1054,22 +1259,65 @@ fn read_raster(
             .ok_or_else(|| {
                 invalid(
                     file,
-                    "profile.image",
+                    key,
                     format!("{name:?}"),
                     "is not an embedded image",
                     "give a spec file",
                 )
-            })?,
-    };
-    let img = image::load_from_memory(&bytes).map_err(|e| {
+            }),
+    }
+}
+
+/// `bytes` decoded as the image `key` names, within [`MAX_IMAGE_PIXELS`]
+/// and [`MAX_IMAGE_ALLOC`].
+fn decode_image(
+    file: &str,
+    (key, name): (&'static str, &str),
+    bytes: &[u8],
+) -> Result<image::DynamicImage, SpecError> {
+    let unreadable = |e: image::ImageError| {
         invalid(
             file,
-            "profile.image",
+            key,
             format!("{name:?}"),
             format!("is not a readable image: {e}"),
             "use a PNG file",
         )
-    })?;
+    };
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| unreadable(e.into()))?;
+    let (w, h) = reader.into_dimensions().map_err(unreadable)?;
+    if u64::from(w) * u64::from(h) > MAX_IMAGE_PIXELS {
+        return Err(invalid(
+            file,
+            key,
+            format!("{name:?}"),
+            format!("is {w} × {h} pixels: at most {MAX_IMAGE_PIXELS} pixels (4096 × 4096)"),
+            "scale the image down",
+        ));
+    }
+    reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| unreadable(e.into()))?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(w);
+    limits.max_image_height = Some(h);
+    limits.max_alloc = Some(MAX_IMAGE_ALLOC);
+    reader.limits(limits);
+    reader.decode().map_err(unreadable)
+}
+
+/// Reads an image as luminance composited over white, with the file's
+/// bytes (which the run's folder keeps beside its spec).
+fn read_raster(
+    file: &str,
+    name: &str,
+    images: &ImageSource,
+) -> Result<(Raster, Vec<u8>), SpecError> {
+    let key = "profile.image";
+    let bytes = image_bytes(file, (key, name), images)?;
+    let img = decode_image(file, (key, name), &bytes)?;
     let la = img.to_luma_alpha32f();
     let (width, height) = (la.width() as usize, la.height() as usize);
     let luminance = la
@@ -1170,3 +1418,6 @@ mod tests {
         assert!(e.contains("surface.z"), "{e}");
     }
 }
+
+#[cfg(test)]
+mod heightmap_tests;
