@@ -165,22 +165,33 @@ fn distance_to_exact(
 ) -> f64 {
     let p = surface.subs(t, v);
     let q = glam::DVec3::new(p.x, p.y, p.z);
-    let mut station = v;
-    for _ in 0..4 {
-        let section = design.base_section_near(k, station, (None, None)).unwrap();
-        let BaseSection::Lens(arc) = section else {
-            return (q - section.point(t)).length();
-        };
-        let normal = arc.chord_dir.cross(arc.bulge).normalize();
-        let off = (q - arc.centre()).dot(normal);
-        let along = surface.vder(t, station);
-        let speed = glam::DVec3::new(along.x, along.y, along.z).dot(normal);
-        if off.abs() < 1e-12 || speed.abs() < 1e-9 {
-            break;
+    // the station whose section's plane holds q, by secants on the exact
+    // sections alone (the surface's own parameter is no station where a
+    // lens ends in a wall: its last span is stretched into the wall)
+    let off = |station: f64| match design.base_section_near(k, station, (None, None)).unwrap() {
+        BaseSection::Lens(arc) => {
+            Some((q - arc.centre()).dot(arc.chord_dir.cross(arc.bulge).normalize()))
         }
-        station += off / speed;
+        _ => None,
+    };
+    let (mut a, mut b) = (v, v + 1e-3);
+    let (Some(mut fa), Some(mut fb)) = (off(a), off(b)) else {
+        // a band span of a printed base: no arc, no plane
+        let section = design.base_section_near(k, v, (None, None)).unwrap();
+        return (q - section.point(t)).length();
+    };
+    {
+        for _ in 0..8 {
+            if fb.abs() < 1e-12 || fb == fa {
+                break;
+            }
+            let next = b - fb * (b - a) / (fb - fa);
+            (a, fa) = (b, fb);
+            b = next;
+            fb = off(b).unwrap_or(0.0);
+        }
     }
-    match design.base_section_near(k, station, (None, None)).unwrap() {
+    match design.base_section_near(k, b, (None, None)).unwrap() {
         BaseSection::Lens(arc) => moirecast_brep::lenses::distance_to_arc(&arc, q),
         section => (q - section.point(t)).length(),
     }

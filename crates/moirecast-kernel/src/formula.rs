@@ -97,7 +97,7 @@ pub fn check_budget(source: &str) -> Result<(), FormulaError> {
         return Err(refuse(
             "formula-operations",
             format!("has {operations} operations (operators and function calls), more than {MAX_OPERATIONS}: its second derivatives grow as their square"),
-            "write fewer terms, or a kind of surface that fits (saddle, paraboloid, cylinder, sphere)",
+            "write fewer terms, or a kind of surface that fits (saddle, paraboloid, cylinder, sphere), or sample it into a heightmap",
         ));
     }
     if powers > MAX_POWERS {
