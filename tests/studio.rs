@@ -482,6 +482,57 @@ fn a_dropped_png_joins_the_specs_folder_under_a_safe_name() {
     );
 }
 
+/// A height map dropped on its field goes into surfaces/, and the surface
+/// takes it with its keys, `size` as two numbers, in one edit.
+#[test]
+fn a_dropped_height_map_becomes_the_surface() {
+    let studio = Studio::start("add-surface", SMALL);
+    let hills = read(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/molds/surfaces/hills.png"
+    )));
+    let r = studio.request("POST", "/api/surfaces?name=my%20hills.png", &hills);
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(r.json()["image"], "surfaces/my-hills.png");
+    assert_eq!(read(&studio.dir.join("surfaces/my-hills.png")), hills);
+    let listed = studio.get("/api/profiles").json();
+    assert!(
+        listed
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|p| p == "surfaces/my-hills.png"),
+        "{listed}"
+    );
+    let patch = |body: &str| {
+        http::request_with(
+            studio.port,
+            &format!("127.0.0.1:{}", studio.port),
+            "PATCH",
+            "/api/spec",
+            &[("Content-Type", "application/json")],
+            body.as_bytes(),
+        )
+    };
+    let r = patch(
+        r#"{"edits": [{"key": "surface.kind", "value": "heightmap"},
+        {"key": "surface.image", "value": "surfaces/my-hills.png"},
+        {"key": "surface.radius", "value": null},
+        {"key": "surface.z_min", "value": 0}, {"key": "surface.z_max", "value": 0.5},
+        {"key": "surface.size", "value": [64, 64]}]}"#,
+    );
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(r.json()["design"]["surface"], "heightmap");
+    let text = String::from_utf8(studio.get("/api/spec").body).unwrap();
+    assert!(text.contains("size = [64.0, 64.0]"), "{text}");
+    // two numbers or nothing; and no other key takes an array
+    let r = patch(r#"{"edits": [{"key": "surface.size", "value": "64 by 64"}]}"#);
+    assert_eq!(r.status, 422);
+    assert_eq!(r.json()["errors"][0]["key"], "surface.size");
+    let r = patch(r#"{"edits": [{"key": "surface.z_max", "value": [1, 2]}]}"#);
+    assert_eq!(r.status, 400);
+}
+
 /// The first event of `kind` among the server-sent `events`.
 fn event_of(events: &str, kind: &str) -> serde_json::Value {
     events

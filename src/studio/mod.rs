@@ -463,6 +463,7 @@ pub fn router(options: &StudioOptions, addr: SocketAddr) -> anyhow::Result<(Rout
         .route("/api/specs", get(files::specs))
         .route("/api/open", post(files::open))
         .route("/api/profiles", get(files::profiles).post(add_profile))
+        .route("/api/surfaces", post(add_surface))
         .route("/api/frame.png", get(frame))
         .route("/api/report", get(report))
         .route("/api/device.stl", get(device_stl))
@@ -754,6 +755,20 @@ async fn patch_spec(State(studio): State<Arc<Studio>>, Json(body): Json<SpecEdit
             None | Some(serde_json::Value::Null) => None,
             Some(serde_json::Value::Bool(b)) => Some(EditValue::Bool(b)),
             Some(serde_json::Value::String(t)) => Some(EditValue::Text(t)),
+            Some(serde_json::Value::Array(items)) => {
+                let pair = moirecast_spec::keys()
+                    .iter()
+                    .any(|d| d.key == key && d.kind == moirecast_spec::ValueKind::Pair);
+                match items.iter().map(serde_json::Value::as_f64).collect() {
+                    Some(numbers) if pair => Some(EditValue::Numbers(numbers)),
+                    _ => {
+                        return error(
+                            StatusCode::BAD_REQUEST,
+                            format!("`{key}`: takes no array (only [X, Y] keys take numbers)"),
+                        )
+                    }
+                }
+            }
             Some(serde_json::Value::Number(n)) => match n.as_f64() {
                 Some(x) => Some(EditValue::Number(x)),
                 None => {
@@ -766,7 +781,7 @@ async fn patch_spec(State(studio): State<Arc<Studio>>, Json(body): Json<SpecEdit
             Some(other) => {
                 return error(
                     StatusCode::BAD_REQUEST,
-                    format!("`{key}`: a boolean, number, string or null, not {other}"),
+                    format!("`{key}`: a boolean, number, string, numbers or null, not {other}"),
                 )
             }
         };
@@ -814,6 +829,11 @@ fn edit_misfit(edit: &moirecast_spec::SpecEdit) -> Option<serde_json::Value> {
             x.to_string(),
             "is not true or false".to_string(),
             "tick or untick it".to_string(),
+        ),
+        (ValueKind::Pair, EditValue::Text(t)) => (
+            t.clone(),
+            "is not two numbers".to_string(),
+            format!("write two numbers{unit}, as 64, 64"),
         ),
         _ => return None,
     };
@@ -869,6 +889,25 @@ async fn add_profile(
     Query(q): Query<AddImage>,
     body: axum::body::Bytes,
 ) -> Response {
+    add_image_to(studio, upload::ImageFolder::Profiles, q, body).await
+}
+
+/// `POST /api/surfaces?name=NAME`: a height map's PNG, into `surfaces/`.
+async fn add_surface(
+    State(studio): State<Arc<Studio>>,
+    Query(q): Query<AddImage>,
+    body: axum::body::Bytes,
+) -> Response {
+    add_image_to(studio, upload::ImageFolder::Surfaces, q, body).await
+}
+
+/// Adds a dropped PNG to the spec's folder `to`: `{"image": PATH}`.
+async fn add_image_to(
+    studio: Arc<Studio>,
+    to: upload::ImageFolder,
+    q: AddImage,
+    body: axum::body::Bytes,
+) -> Response {
     let Home::File { dir, .. } = studio.home() else {
         return error(
             StatusCode::CONFLICT,
@@ -876,7 +915,8 @@ async fn add_profile(
         );
     };
     let dir = dir.clone();
-    let added = tokio::task::spawn_blocking(move || upload::add_image(&dir, &q.name, &body)).await;
+    let added =
+        tokio::task::spawn_blocking(move || upload::add_image(&dir, to, &q.name, &body)).await;
     match added {
         Ok(Ok(image)) => Json(json!({"image": image})).into_response(),
         Ok(Err(why)) => error(StatusCode::BAD_REQUEST, why),

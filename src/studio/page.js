@@ -62,34 +62,48 @@ function buildForm() {
   }
 }
 
-function setProfileChoices(profiles) {
-  const doc = studio.keys.find((d) => d.key === "profile.image");
-  const old = document.querySelector('[data-key="profile.image"] input, [data-key="profile.image"] select');
-  if (!doc || !old) return;
-  const select = document.createElement("select");
-  select.id = old.id; select.name = old.name;
-  // every name from the server is text, never markup
-  select.add(new Option("(none)", ""));
-  for (const p of profiles) select.add(new Option(p, p));
-  select.value = old.value;
-  select.addEventListener("change", () => edit(doc, select.value));
-  old.replaceWith(select);
+// The images in the spec's folder, to pick as the profile or as the
+// height map.
+function setProfileChoices(images) {
+  for (const key of ["profile.image", "surface.image"]) {
+    const doc = studio.keys.find((d) => d.key === key);
+    const old = document.querySelector(`[data-key="${key}"] input, [data-key="${key}"] select`);
+    if (!doc || !old) continue;
+    const select = document.createElement("select");
+    select.id = old.id; select.name = old.name;
+    // every name from the server is text, never markup
+    select.add(new Option("(none)", ""));
+    for (const p of images) select.add(new Option(p, p));
+    select.value = old.value;
+    select.addEventListener("change", () => edit(doc, select.value));
+    old.replaceWith(select);
+  }
 }
 
 // A PNG dropped anywhere on the page goes into the spec's folder
-// (profiles/, named safely by the server) and becomes the profile.
+// (profiles/, named safely by the server) and becomes the profile; dropped
+// on the height map's field, it goes into surfaces/ and becomes the
+// surface.
 document.addEventListener("dragover", (e) => { if (e.dataTransfer && [...e.dataTransfer.types].includes("Files")) e.preventDefault(); });
 document.addEventListener("drop", async (e) => {
   const file = e.dataTransfer && e.dataTransfer.files[0];
   if (!file) return;
   e.preventDefault();
   if (file.type && file.type !== "image/png") { setStatus(`${file.name}: drop a PNG image`); return; }
-  const response = await api(`/api/profiles?name=${encodeURIComponent(file.name)}`, { method: "POST", body: await file.arrayBuffer(), headers: { "content-type": "image/png" } });
+  const surface = e.target instanceof Element && e.target.closest('[data-key="surface.image"]');
+  const route = surface ? "surfaces" : "profiles";
+  const response = await api(`/api/${route}?name=${encodeURIComponent(file.name)}`, { method: "POST", body: await file.arrayBuffer(), headers: { "content-type": "image/png" } });
   const body = await response.json().catch(() => ({}));
   if (!response.ok) { setStatus(`${file.name}: ${body.error || `HTTP ${response.status}`}`); return; }
   setProfileChoices(await (await api("/api/profiles")).json());
-  await patchSpec([{ key: "profile.kind", value: "image" }, { key: "profile.image", value: body.image }]);
-  setStatus(`added ${body.image} and made it the profile`);
+  if (surface) {
+    await patchSpec([{ key: "surface.kind", value: "heightmap" }, { key: "surface.image", value: body.image },
+      { key: "surface.z", value: null }, { key: "surface.radius", value: null }]);
+    setStatus(`added ${body.image} and made it the height map`);
+  } else {
+    await patchSpec([{ key: "profile.kind", value: "image" }, { key: "profile.image", value: body.image }]);
+    setStatus(`added ${body.image} and made it the profile`);
+  }
 });
 
 // Which keys apply to the design as written: the others (printed keys on a
@@ -106,8 +120,13 @@ function applies(key) {
   const base = v("base.kind") ?? "dual-lens";
   const profile = v("profile.kind") ?? (v("profile.image") !== undefined ? "image" : "rings");
   const rules = {
-    "surface.radius": surface !== "plane" && surface !== "formula",
+    "surface.radius": !["plane", "formula", "heightmap"].includes(surface),
     "surface.z": surface === "formula",
+    "surface.image": surface === "heightmap",
+    "surface.z_min": surface === "heightmap",
+    "surface.z_max": surface === "heightmap",
+    "surface.size": surface === "heightmap",
+    "surface.smoothing": surface === "heightmap",
     "base.afov": base === "dual-lens",
     "base.duty": base === "printed",
     "base.band_thickness": base === "printed",
@@ -154,6 +173,12 @@ function parseField(doc, text) {
   if (kind === "number" || kind === "distance") {
     const n = Number(text);
     return text.trim() !== "" && Number.isFinite(n) ? n : text;
+  }
+  if (kind === "pair") {
+    // "64, 64" or "[64, 64]"
+    const parts = text.replace(/^\s*\[|\]\s*$/g, "").split(",").map((p) => p.trim());
+    const numbers = parts.map(Number);
+    return parts.length === 2 && parts.every((p) => p !== "") && numbers.every(Number.isFinite) ? numbers : text;
   }
   return text;
 }
@@ -235,6 +260,7 @@ async function edit(doc, text) {
   const v = parseField(doc, text);
   const edits = [{ key: doc.key, value: v === undefined ? null : v }];
   if (doc.key === "profile.image" && v !== undefined) edits.push({ key: "profile.kind", value: "image" });
+  if (doc.key === "surface.image" && v !== undefined) edits.push({ key: "surface.kind", value: "heightmap" });
   if (doc.key === "profile.kind" && v !== undefined && v !== "image") edits.push({ key: "profile.image", value: null });
   const withDraft = [...edits];
   for (const [key, draft] of studio.refused) {

@@ -1,24 +1,47 @@
 //! An image dropped on the page, added to the spec's folder: read as a PNG
-//! within a pixel budget, named safely inside `profiles/`, written whole
-//! (a temporary renamed in) or not at all.
+//! within a pixel budget, named safely inside `profiles/` (a profile) or
+//! `surfaces/` (a height map), written whole (a temporary renamed in) or
+//! not at all.
 
 use std::path::Path;
 
 /// The most pixels an added image may have (a 1 MB body can hold a PNG
-/// that decodes to gigabytes).
-pub const MAX_IMAGE_PIXELS: u64 = 4096 * 4096;
+/// that decodes to gigabytes): a spec's own budget.
+pub const MAX_IMAGE_PIXELS: u64 = moirecast_spec::MAX_IMAGE_PIXELS;
 
 /// The longest file stem an added image keeps.
 const MAX_STEM_CHARS: usize = 64;
 
+/// The folder an added image goes to: `profiles` or `surfaces`.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum ImageFolder {
+    Profiles,
+    Surfaces,
+}
+
+impl ImageFolder {
+    fn name(self) -> &'static str {
+        match self {
+            ImageFolder::Profiles => "profiles",
+            ImageFolder::Surfaces => "surfaces",
+        }
+    }
+}
+
 /// Adds the PNG `bytes`, dropped as a file named `given`, to `dir`'s
-/// `profiles/` and returns its path relative to `dir` (as a spec names it):
-/// the same bytes already there are reused, another file of that name is
-/// never replaced (`-2`, `-3`, … is added).
-pub(super) fn add_image(dir: &Path, given: &str, bytes: &[u8]) -> Result<String, String> {
+/// `to` folder and returns its path relative to `dir` (as a spec names
+/// it): the same bytes already there are reused, another file of that
+/// name is never replaced (`-2`, `-3`, … is added).
+pub(super) fn add_image(
+    dir: &Path,
+    to: ImageFolder,
+    given: &str,
+    bytes: &[u8],
+) -> Result<String, String> {
     check_png(bytes)?;
     let stem = safe_stem(given);
-    let folder = dir.join("profiles");
+    let sub = to.name();
+    let folder = dir.join(sub);
     std::fs::create_dir_all(&folder)
         .map_err(|e| format!("cannot make {}: {e}", folder.display()))?;
     for n in 1..1000 {
@@ -28,7 +51,7 @@ pub(super) fn add_image(dir: &Path, given: &str, bytes: &[u8]) -> Result<String,
         };
         let path = folder.join(&name);
         match std::fs::read(&path) {
-            Ok(there) if there == bytes => return Ok(format!("profiles/{name}")),
+            Ok(there) if there == bytes => return Ok(format!("{sub}/{name}")),
             Ok(_) => continue,
             Err(_) if path.exists() => continue,
             Err(_) => {}
@@ -40,9 +63,9 @@ pub(super) fn add_image(dir: &Path, given: &str, bytes: &[u8]) -> Result<String,
         if written.is_err() {
             let _ = std::fs::remove_file(&temporary);
         }
-        return written.map(|()| format!("profiles/{name}"));
+        return written.map(|()| format!("{sub}/{name}"));
     }
-    Err(format!("profiles/ already holds 999 images named {stem}"))
+    Err(format!("{sub}/ already holds 999 images named {stem}"))
 }
 
 /// Whether `bytes` are a PNG image of at most [`MAX_IMAGE_PIXELS`] that

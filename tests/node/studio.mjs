@@ -17,7 +17,7 @@
 // revisions, with an unsaved mark; Save as and Open; the checks are
 // grouped by part, labelled, and a failed one cannot be missed; scoring the explore grid shows its
 // progress and can be cancelled; the grid marks the current design's cell, and goes stale when the design changes; at 390 px the
-// page scrolls only down; at 1920 px the moiré grows past 512 px; a dropped PNG becomes the profile. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
+// page scrolls only down; at 1920 px the moiré grows past 512 px; a dropped PNG becomes the profile, or the height map when dropped on its field. Saves screenshots at 1400 and 390 px. Exits non-zero, saying why, on any failure.
 
 import { existsSync, readFileSync } from "node:fs";
 import { join } from "node:path";
@@ -347,6 +347,27 @@ try {
   await wide.waitForFunction(() => window.studio && window.studio.frames >= 1 && document.getElementById("frame").naturalWidth > 256, null, { timeout: 60000 });
   const big = await wide.evaluate(() => ({ shown: document.getElementById("frame").getBoundingClientRect().width, pixels: document.getElementById("frame").naturalWidth, scroll: document.documentElement.scrollWidth <= document.documentElement.clientWidth }));
   check(big.shown > 600 && big.pixels >= 512 && big.scroll, `at 1920 px the moiré is ${big.shown.toFixed(0)} px wide, from a ${big.pixels} px frame, with no sideways scrolling`);
+
+  // last (the other pages render the design before it): a height map dropped on its field joins surfaces/ and becomes the surface
+  const hills = readFileSync(new URL("../../molds/surfaces/hills.png", import.meta.url)).toString("base64");
+  const beforeHills = await page.evaluate(() => window.studio.revision);
+  await page.evaluate((b64) => {
+    const bytes = Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+    const transfer = new DataTransfer();
+    transfer.items.add(new File([bytes], "hills.png", { type: "image/png" }));
+    const field = document.querySelector('[data-key="surface.image"]');
+    field.dispatchEvent(new DragEvent("drop", { dataTransfer: transfer, bubbles: true, cancelable: true }));
+  }, hills);
+  await page.waitForFunction(([r]) => window.studio.revision > r, [beforeHills], { timeout: 60000 });
+  const surfaced = await page.evaluate(() => ({
+    surface: window.studio.values.surface,
+    chosen: document.getElementById("f-surface-image").value,
+    shown: !document.querySelector('[data-key="surface.z_max"]').hidden,
+    radius: document.querySelector('[data-key="surface.radius"]').hidden,
+  }));
+  check(surfaced.surface.kind === "heightmap" && surfaced.surface.image === "surfaces/hills.png" && surfaced.chosen === "surfaces/hills.png"
+    && surfaced.shown && surfaced.radius && existsSync(join(work, "surfaces", "hills.png")),
+    `a PNG dropped on the height map's field becomes the surface, with its keys shown: ${JSON.stringify(surfaced)}`);
 } catch (e) {
   check(false, String(e));
 } finally {

@@ -18,6 +18,8 @@ pub enum EditValue {
     Bool(bool),
     Number(f64),
     Text(String),
+    /// An array of numbers (`surface.size`), written as floats.
+    Numbers(Vec<f64>),
 }
 
 /// Why an edit could not be applied: the text is no TOML document, or a
@@ -89,6 +91,7 @@ fn set(table: &mut Table, name: &str, value: &EditValue) {
         EditValue::Bool(b) => Value::from(*b),
         EditValue::Text(s) => Value::from(s.as_str()),
         EditValue::Number(x) => number(*x, float_before),
+        EditValue::Numbers(xs) => Value::Array(xs.iter().copied().collect()),
     };
     if let Some(old) = old {
         *new.decor_mut() = old.decor().clone();
@@ -113,6 +116,14 @@ fn equal(old: &Value, new: &EditValue) -> bool {
         (Value::String(a), EditValue::Text(b)) => a.value() == b,
         (Value::Float(a), EditValue::Number(b)) => *a.value() == *b,
         (Value::Integer(a), EditValue::Number(b)) => *a.value() as f64 == *b,
+        (Value::Array(a), EditValue::Numbers(b)) => {
+            a.len() == b.len()
+                && a.iter().zip(b).all(|(a, b)| match a {
+                    Value::Float(f) => *f.value() == *b,
+                    Value::Integer(i) => *i.value() as f64 == *b,
+                    _ => false,
+                })
+        }
         _ => false,
     }
 }

@@ -157,9 +157,9 @@ fn bad_height_maps_are_refused_by_key() {
         ),
         (hm(ok), "surface.image", "needs a greyscale PNG"),
         (
-            hm("image = \"surfaces/ok.png\"\nz_max = 1.0"),
-            "surface.z_min",
-            "needs it",
+            hm("image = \"surfaces/ok.png\"\nz_min = 2.0"),
+            "surface.z_max",
+            "below surface.z_min",
         ),
         (
             hm("image = \"surfaces/ok.png\"\nz_min = 2.0\nz_max = 1.0"),
@@ -186,7 +186,9 @@ fn bad_height_maps_are_refused_by_key() {
             "only used with kind = \"heightmap\"",
         ),
     ] {
-        let e = parse(&text, "bad.toml", ImageSource::Dir(&dir)).unwrap_err();
+        let Err(e) = parse(&text, "bad.toml", ImageSource::Dir(&dir)) else {
+            panic!("{text}: accepted")
+        };
         let SpecError::Invalid {
             key: got,
             problem,

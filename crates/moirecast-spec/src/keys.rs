@@ -22,6 +22,8 @@ pub enum ValueKind {
     Text,
     /// A number in mm, or the word "focal".
     Distance,
+    /// Two numbers, `[X, Y]`.
+    Pair,
 }
 
 /// One key of the spec.
@@ -75,9 +77,9 @@ pub fn keys() -> Vec<KeyDoc> {
         doc("surface.radius", Number, None, "≠ 0; lens flanks (slope + AFOV/2) at most 80°".into(), "mm", "Radius of curvature. Paraboloid and sphere: + bowl, − dome; cylinder: + bends down, − up. Not used by plane, formula and heightmap."),
         doc("surface.z", Text, Some("(none)"), format!("a formula in x and y (mm from the centre); at most {} characters, {} operations, {} powers, parentheses {} deep", moirecast_kernel::formula::MAX_CHARS, moirecast_kernel::formula::MAX_OPERATIONS, moirecast_kernel::formula::MAX_POWERS, moirecast_kernel::formula::MAX_DEPTH), "mm", "kind = \"formula\": z = h(x, y), e.g. \"(x*x - y*y)/120\"."),
         doc("surface.image", Text, Some("(none)"), format!("a greyscale PNG (8 or 16 bit) relative to the spec, at least 4 × 4 and at most {} pixels", crate::MAX_IMAGE_PIXELS), "", "kind = \"heightmap\": the heights, black at z_min and white at z_max, the top row at +y; the surface is a C² smoothing bicubic B-spline through them."),
-        doc("surface.z_min", Number, Some("(required with kind = \"heightmap\")"), any(), "mm", "kind = \"heightmap\": the height of black."),
-        doc("surface.z_max", Number, Some("(required with kind = \"heightmap\")"), "≥ z_min".into(), "mm", "kind = \"heightmap\": the height of white."),
-        doc("surface.size", Text, Some("[layout.width, layout.height]"), "[X, Y], covering the layout".into(), "mm", "kind = \"heightmap\": the extent the image covers, centred on the layout's centre (x = u − W/2); beyond it the spline is continued."),
+        doc("surface.z_min", Number, Some("0.0 with kind = \"heightmap\""), any(), "mm", "kind = \"heightmap\": the height of black."),
+        doc("surface.z_max", Number, Some("1.0 with kind = \"heightmap\""), "≥ z_min".into(), "mm", "kind = \"heightmap\": the height of white."),
+        doc("surface.size", Pair, Some("[layout.width, layout.height]"), "[X, Y], covering the layout".into(), "mm", "kind = \"heightmap\": the extent the image covers, centred on the layout's centre (x = u − W/2); beyond it the spline is continued."),
         doc("surface.smoothing", Number, Some("8 pixels' spacing for 16-bit images, 24 for 8-bit"), "≥ 0".into(), "mm", "kind = \"heightmap\": features shorter than this keep at most half their height (third-difference P-spline); report.json states the fit's largest deviation from the samples."),
         doc("layout.width", Number, None, format!("a whole number of periods, at most {} lenses", design::MAX_LENSES), "mm", "Width across the lenses (u, along x)."),
         doc("layout.height", Number, None, positive(), "mm", "Height along the lenses (v, along y)."),

@@ -931,6 +931,10 @@ fn height_map(
 /// `the_default_smoothing_quiets_quantised_heights`).
 pub const HEIGHTMAP_SMOOTHING_PX: (f64, f64) = (24.0, 8.0);
 
+/// The heights (mm) of black and white in a height map, unless the spec
+/// gives them: a relief of 1 mm to start from.
+pub const HEIGHTMAP_Z: (f64, f64) = (0.0, 1.0);
+
 /// Reads `surface.image` and its keys into height samples.
 fn height_image(
     file: &str,
@@ -938,18 +942,6 @@ fn height_image(
     (w, h): (f64, f64),
     images: &ImageSource,
 ) -> Result<HeightImage, SpecError> {
-    let required = |key: &'static str, v: Option<f64>, example: &str| {
-        let v = v.ok_or_else(|| {
-            invalid(
-                file,
-                key,
-                "(missing)",
-                "kind = \"heightmap\" needs it, in mm",
-                format!("add e.g. {example}"),
-            )
-        })?;
-        finite(file, key, v)
-    };
     let name = s.image.clone().ok_or_else(|| {
         invalid(
             file,
@@ -960,8 +952,8 @@ fn height_image(
         )
     })?;
     let (z_min, z_max) = (
-        required("surface.z_min", s.z_min, "z_min = 0.0")?,
-        required("surface.z_max", s.z_max, "z_max = 3.0")?,
+        finite(file, "surface.z_min", s.z_min.unwrap_or(HEIGHTMAP_Z.0))?,
+        finite(file, "surface.z_max", s.z_max.unwrap_or(HEIGHTMAP_Z.1))?,
     );
     if z_max < z_min {
         return Err(invalid(
