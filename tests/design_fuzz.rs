@@ -28,6 +28,9 @@ use std::time::{Duration, Instant};
 
 /// Cases per run in CI.
 const CASES: usize = 160;
+/// Cases on a height map per run in CI, drawn from a stream of their own
+/// (so the other cases stay the seed's).
+const HEIGHTMAP_CASES: usize = 24;
 /// Bytes a fuzzed design's mold run may hold (about 150,000 triangles):
 /// larger draws are refused by the budget rule, which keeps a case under a
 /// second.
@@ -349,10 +352,142 @@ fn refusal(e: &anyhow::Error) -> Option<String> {
     }
 }
 
+/// `text` with its `[surface]` replaced by a drawn height map: smooth
+/// fields, noise, steps and ramps, 1 to 256 pixels a side, 8 or 16 bit,
+/// over extents from the layout's to a hundred times it (and short of it
+/// sometimes), with reliefs from 0.1 µm to 60 mm (and upside down
+/// sometimes), smoothed or not.
+fn on_a_height_map(rng: &mut Rng, text: &str) -> String {
+    let table: toml::Table = toml::from_str(text).expect("a drawn spec is TOML");
+    let layout = |key: &str| table["layout"][key].as_float().unwrap_or(10.0);
+    let (w, h) = (layout("width"), layout("height"));
+    let family = *rng.pick(&["smooth", "noise", "step", "ramp"]);
+    let sides = [1, 2, 4, 7, 16, 33, 64, 128, 256];
+    let (cols, rows) = (*rng.pick(&sides), *rng.pick(&sides));
+    let bits = *rng.pick(&[8, 16]);
+    let image = format!(
+        "surfaces/{family}-{cols}x{rows}-{bits}b-{}.png",
+        rng.next() % 1000
+    );
+    let z_min = rng.uniform(-20.0, 20.0);
+    let relief = rng.log(1e-4, 60.0);
+    let z_max = if rng.chance(0.05) {
+        z_min - relief
+    } else {
+        z_min + relief
+    };
+    let scale = match rng.next() % 20 {
+        0 => rng.uniform(0.5, 1.0),
+        1 => rng.log(10.0, 100.0),
+        _ => rng.uniform(1.0, 3.0),
+    };
+    let mut surface = format!(
+        "[surface]\nkind = \"heightmap\"\nimage = \"{image}\"\nz_min = {}\nz_max = {}\nsize = [{}, {}]\n",
+        num(z_min),
+        num(z_max),
+        num(w * scale),
+        num(h * scale)
+    );
+    if rng.chance(0.5) {
+        writeln!(surface, "smoothing = {}", num(rng.log(1e-3, 100.0))).unwrap();
+    }
+    let rest = &text[text.find("[layout]").expect("a drawn spec has a layout")..];
+    format!("{surface}{rest}")
+}
+
+/// The folder a case's images come from: the shipped profiles, and the
+/// height maps its spec names, each written from its name (so a saved
+/// case finds its map again): `surfaces/FAMILY-COLSxROWS-BITSb-SEED.png`.
+fn fuzz_images(text: &str) -> std::io::Result<PathBuf> {
+    let dir = std::env::temp_dir().join(format!("moirecast-fuzz-images-{}", std::process::id()));
+    let profiles = Path::new(env!("CARGO_MANIFEST_DIR")).join("molds/profiles");
+    std::fs::create_dir_all(dir.join("profiles"))?;
+    std::fs::create_dir_all(dir.join("surfaces"))?;
+    for entry in std::fs::read_dir(&profiles)? {
+        let entry = entry?;
+        let to = dir.join("profiles").join(entry.file_name());
+        if !to.exists() {
+            std::fs::copy(entry.path(), to)?;
+        }
+    }
+    let named = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("image = \"surfaces/"))
+        .filter_map(|l| l.strip_suffix(".png\""));
+    for name in named {
+        let path = dir.join("surfaces").join(format!("{name}.png"));
+        if !path.exists() {
+            write_height_map(name, &path)?;
+        }
+    }
+    Ok(dir)
+}
+
+/// Writes the height map `name` (FAMILY-COLSxROWS-BITSb-SEED) to `path`.
+fn write_height_map(name: &str, path: &Path) -> std::io::Result<()> {
+    let bad = || std::io::Error::other(format!("no height map is named {name}"));
+    let parts: Vec<&str> = name.split('-').collect();
+    let [family, size, bits, seed] = parts[..] else {
+        return Err(bad());
+    };
+    let (cols, rows) = size.split_once('x').ok_or_else(bad)?;
+    let (cols, rows): (u32, u32) = (
+        cols.parse().map_err(|_| bad())?,
+        rows.parse().map_err(|_| bad())?,
+    );
+    let seed: u64 = seed.parse().map_err(|_| bad())?;
+    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0x5EED);
+    let bumps: Vec<[f64; 4]> = (0..3)
+        .map(|_| {
+            [
+                rng.unit(),
+                rng.unit(),
+                rng.log(0.05, 0.5),
+                rng.uniform(-1.0, 1.0),
+            ]
+        })
+        .collect();
+    let value = |i: u32, j: u32, rng: &mut Rng| -> f64 {
+        let (x, y) = (
+            (f64::from(i) + 0.5) / f64::from(cols),
+            (f64::from(j) + 0.5) / f64::from(rows),
+        );
+        match family {
+            "noise" => rng.unit(),
+            "step" => f64::from(u8::from(x > 0.5)),
+            "ramp" => x,
+            _ => {
+                let sum: f64 = bumps
+                    .iter()
+                    .map(|[cx, cy, r, a]| {
+                        a * (-((x - cx).powi(2) + (y - cy).powi(2)) / (2.0 * r * r)).exp()
+                    })
+                    .sum();
+                (0.5 + 0.3 * sum).clamp(0.0, 1.0)
+            }
+        }
+    };
+    let saved = if bits == "16b" {
+        image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(cols, rows, |i, j| {
+            image::Luma([(value(i, j, &mut rng) * 65535.0).round() as u16])
+        })
+        .save(path)
+    } else {
+        image::ImageBuffer::<image::Luma<u8>, Vec<u8>>::from_fn(cols, rows, |i, j| {
+            image::Luma([(value(i, j, &mut rng) * 255.0).round() as u8])
+        })
+        .save(path)
+    };
+    saved.map_err(std::io::Error::other)
+}
+
 /// Runs one spec text: its device, and its mold if `with_mold`.
 fn run_case(text: &str, with_mold: bool, out: &Path) -> Outcome {
-    let molds = Path::new(env!("CARGO_MANIFEST_DIR")).join("molds");
-    let mut spec = match moirecast_spec::parse(text, "fuzz.toml", ImageSource::Dir(&molds)) {
+    let images = match fuzz_images(text) {
+        Ok(dir) => dir,
+        Err(e) => return Outcome::Bug(format!("the drawn height map cannot be written: {e}")),
+    };
+    let mut spec = match moirecast_spec::parse(text, "fuzz.toml", ImageSource::Dir(&images)) {
         Ok(spec) => spec,
         Err(SpecError::Invalid { key, .. }) => return Outcome::Refused(key.to_string()),
         Err(e) => return Outcome::Bug(format!("the drawn spec does not parse: {e}")),
@@ -449,7 +584,11 @@ fn every_accepted_design_builds_or_is_refused_by_name() {
                 .duration_since(std::time::UNIX_EPOCH)
                 .map_or(1, |d| d.as_nanos() as u64)
         });
-    println!("design fuzz: seed {seed}, {} cases", CASES * soak);
+    println!(
+        "design fuzz: seed {seed}, {} cases ({} on height maps)",
+        (CASES + HEIGHTMAP_CASES) * soak,
+        HEIGHTMAP_CASES * soak
+    );
     let out = std::env::temp_dir().join(format!("moirecast-fuzz-{}", std::process::id()));
     // past failures first, each with its mold if it has a [mold] table
     let mut corpus: Vec<PathBuf> = std::fs::read_dir(corpus_dir())
@@ -470,6 +609,12 @@ fn every_accepted_design_builds_or_is_refused_by_name() {
     for i in 0..CASES * soak {
         let with_mold = i % 3 == 0;
         cases.push((draw(&mut rng, with_mold), with_mold, None));
+    }
+    let mut maps = Rng(seed ^ 0x4845_4947_4854);
+    for i in 0..HEIGHTMAP_CASES * soak {
+        let with_mold = i % 3 == 0;
+        let text = draw(&mut maps, with_mold);
+        cases.push((on_a_height_map(&mut maps, &text), with_mold, None));
     }
     const SLOW_CASE: Duration = Duration::from_secs(5);
     let (mut built, mut molds) = (0, 0);
