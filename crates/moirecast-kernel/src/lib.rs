@@ -40,6 +40,7 @@ pub mod measure;
 pub mod mesh;
 pub mod mesher;
 pub mod model;
+pub mod patch;
 pub mod printed;
 pub mod profile;
 pub mod progress;
