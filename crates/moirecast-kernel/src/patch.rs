@@ -133,7 +133,8 @@ fn sample_row(
         if last < 0.0 {
             continue;
         }
-        for i in first..=(last as usize).min(grid.columns - 1) {
+        let end = (last as usize).min(grid.columns - 1);
+        for (i, slot) in met.iter_mut().enumerate().take(end + 1).skip(first) {
             let q = DVec2::new(grid.x(i), y);
             let (wb, wc) = (
                 (q - a2).perp_dot(c2 - a2) / area,
@@ -144,8 +145,8 @@ fn sample_row(
                 continue;
             }
             let h = wa * a.z + wb * b.z + wc * c.z;
-            match met[i] {
-                None => met[i] = Some(h),
+            match *slot {
+                None => *slot = Some(h),
                 Some(other) if (other - h).abs() > SAME_HEIGHT_MM => {
                     return Err(PatchError::Overhang {
                         x: q.x,

@@ -926,7 +926,7 @@ impl Section {
 /// the difference moves the meeting by less than 0.25 µm.
 ///
 /// Every meeting is then held to the design's mesh tolerance, the mesh's
-/// own promise, in three tiers ([`LensAround`] gives the bounds, from the
+/// own promise, in three tiers (`LensAround` gives the bounds, from the
 /// lens's ends in the neighbouring sections):
 /// - kept, where its distance from the row lies within the lens's reach
 ///   ([`Sections`] keeps each lens's, the distance at which the swept
