@@ -112,7 +112,13 @@ impl HeightMap {
             let l = (smoothing / (std::f64::consts::TAU * spacing)).powi(6);
             l.max(Self::MIN_LAMBDA)
         };
-        let coef = fit_grid(samples, (lambda(hx), lambda(hy)));
+        let coef = fit_grid(
+            samples,
+            Penalty {
+                along_x: lambda(hx),
+                along_y: lambda(hy),
+            },
+        );
         let mut map = HeightMap {
             coef,
             stride: nx + 2,
@@ -270,18 +276,25 @@ impl HeightMap {
     }
 }
 
-/// The coefficients of `samples`' fit, rows first, then columns, with
-/// penalty weights λ along x and along y.
-fn fit_grid(samples: &HeightSamples, (lx, ly): (f64, f64)) -> Vec<f64> {
+/// The P-spline's penalty weights λ along x (on the rows) and along y (on
+/// the columns).
+#[derive(Clone, Copy, Debug)]
+struct Penalty {
+    along_x: f64,
+    along_y: f64,
+}
+
+/// The coefficients of `samples`' fit, rows first, then columns.
+fn fit_grid(samples: &HeightSamples, penalty: Penalty) -> Vec<f64> {
     let (nx, ny) = (samples.columns, samples.rows);
-    let along_x = Banded::p_spline(nx, lx);
+    let along_x = Banded::p_spline(nx, penalty.along_x);
     // each row of samples → nx + 2 coefficients
     let rows: Vec<Vec<f64>> = samples
         .z
         .par_chunks(nx)
         .map(|row| along_x.fit(row))
         .collect();
-    let along_y = Banded::p_spline(ny, ly);
+    let along_y = Banded::p_spline(ny, penalty.along_y);
     // each column of those → ny + 2 coefficients
     let columns: Vec<Vec<f64>> = (0..nx + 2)
         .into_par_iter()

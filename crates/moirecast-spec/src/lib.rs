@@ -725,7 +725,15 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
         finite(file, "layout.width", layout.width)?,
         finite(file, "layout.height", layout.height)?,
     );
-    let (surface, surface_image) = surface(file, &raw.surface, (w, h), &images)?;
+    let (surface, surface_image) = surface(
+        file,
+        &raw.surface,
+        LayoutSize {
+            width: w,
+            height: h,
+        },
+        &images,
+    )?;
     let index = lens_index(file, &raw.lens)?;
     let base_kind = base_kind(file, &raw.base)?;
     let d = base_d(file, &raw.base.d)?;
@@ -809,7 +817,7 @@ pub fn parse(text: &str, file: &str, images: ImageSource) -> Result<Spec, SpecEr
 fn surface(
     file: &str,
     s: &SurfaceTable,
-    (w, h): (f64, f64),
+    layout: LayoutSize,
     images: &ImageSource,
 ) -> Result<(PitchSurface, ReadImage), SpecError> {
     let radius = finite(file, "surface.radius", s.radius)?;
@@ -836,7 +844,7 @@ fn surface(
                 )?)
             }
             SurfaceKind::Heightmap => {
-                let (map, image) = height_map(file, s, (w, h), images)?;
+                let (map, image) = height_map(file, s, layout, images)?;
                 return Ok((
                     PitchSurface::HeightMap(std::sync::Arc::new(map)),
                     Some(image),
@@ -891,10 +899,10 @@ struct HeightImage {
 fn height_map(
     file: &str,
     s: &SurfaceTable,
-    (w, h): (f64, f64),
+    layout: LayoutSize,
     images: &ImageSource,
 ) -> Result<(HeightMap, SpecImage), SpecError> {
-    let read = height_image(file, s, (w, h), images)?;
+    let read = height_image(file, s, layout, images)?;
     let (sx, sy) = read.samples.extent;
     let spacing = (sx / read.samples.columns as f64).max(sy / read.samples.rows as f64);
     // heights come in steps of the range over 255 or 65535: noise that an
@@ -939,9 +947,10 @@ pub const HEIGHTMAP_Z: (f64, f64) = (0.0, 1.0);
 fn height_image(
     file: &str,
     s: &SurfaceTable,
-    (w, h): (f64, f64),
+    layout: LayoutSize,
     images: &ImageSource,
 ) -> Result<HeightImage, SpecError> {
+    let (w, h) = (layout.width, layout.height);
     let name = s.image.clone().ok_or_else(|| {
         invalid(
             file,
@@ -979,8 +988,8 @@ fn height_image(
         ));
     }
     let key = "surface.image";
-    let bytes = image_bytes(file, (key, &name), images)?;
-    let img = decode_image(file, (key, &name), &bytes)?;
+    let bytes = image_bytes(file, ImageRef { key, name: &name }, images)?;
+    let img = decode_image(file, ImageRef { key, name: &name }, &bytes)?;
     let bits = if img.color().bits_per_pixel() / u16::from(img.color().channel_count()) > 8 {
         16
     } else {
@@ -1224,13 +1233,24 @@ pub const MAX_IMAGE_PIXELS: u64 = 4096 * 4096;
 /// image at 16 bits per channel, four channels, with room to spare.
 const MAX_IMAGE_ALLOC: u64 = 512 << 20;
 
+/// The layout's width and height (mm), as the surface reads them.
+#[derive(Clone, Copy, Debug)]
+struct LayoutSize {
+    width: f64,
+    height: f64,
+}
+
+/// A file a spec names: the key that names it, and the name it gives.
+#[derive(Clone, Copy, Debug)]
+struct ImageRef<'a> {
+    key: &'static str,
+    name: &'a str,
+}
+
 /// The bytes of the image `key` names: from the spec's folder, or
 /// embedded in the binary.
-fn image_bytes(
-    file: &str,
-    (key, name): (&'static str, &str),
-    images: &ImageSource,
-) -> Result<Vec<u8>, SpecError> {
+fn image_bytes(file: &str, image: ImageRef, images: &ImageSource) -> Result<Vec<u8>, SpecError> {
+    let ImageRef { key, name } = image;
     match images {
         ImageSource::Dir(dir) => {
             let path = dir.join(name);
@@ -1264,9 +1284,10 @@ fn image_bytes(
 /// and [`MAX_IMAGE_ALLOC`].
 fn decode_image(
     file: &str,
-    (key, name): (&'static str, &str),
+    image: ImageRef,
     bytes: &[u8],
 ) -> Result<image::DynamicImage, SpecError> {
+    let ImageRef { key, name } = image;
     let unreadable = |e: image::ImageError| {
         invalid(
             file,
@@ -1308,8 +1329,8 @@ fn read_raster(
     images: &ImageSource,
 ) -> Result<(Raster, Vec<u8>), SpecError> {
     let key = "profile.image";
-    let bytes = image_bytes(file, (key, name), images)?;
-    let img = decode_image(file, (key, name), &bytes)?;
+    let bytes = image_bytes(file, ImageRef { key, name }, images)?;
+    let img = decode_image(file, ImageRef { key, name }, &bytes)?;
     let la = img.to_luma_alpha32f();
     let (width, height) = (la.width() as usize, la.height() as usize);
     let luminance = la
